@@ -1,0 +1,61 @@
+"""Goal-conditioned Gymnasium environments of the paper, registered under the ``ebm/`` namespace.
+
+Importing this package registers:
+
+- ``ebm/Particle-v0``: a point in [-1, 1]^2 moving by at most 0.05 per axis per step (optional box obstacle).
+- ``ebm/Maze-v0``: the particle with the walls of the authors' final maze layout.
+- ``ebm/Reacher-v0``: gymnasium's Reacher-v4 seen through the paper's normalised 4-D joint state.
+- ``ebm/SawyerReach-v0``: a torque-controlled 7-DoF Sawyer arm built from Metaworld's assets.
+
+``gym.make("envs:ebm/Particle-v0")`` imports the package first, so third-party CLIs need no import.
+
+Every environment follows the same contract (what the agents rely on), on its *unwrapped* object:
+
+- ``observation_space`` is a ``Dict`` with ``observation`` [D], ``achieved_goal`` [G] and ``desired_goal`` [G]
+  (gymnasium-robotics' ``GoalEnv`` convention); ``achieved_goal == observation[goal_indices]``.
+- ``compute_reward(achieved_goal, desired_goal, info)`` is vectorised over a leading batch axis.
+- ``info["is_success"]`` is set on every step.
+- ``goal_indices``: ``np.ndarray`` of int, the observation dims the goal constrains.
+- ``target_indices``: ``np.ndarray`` of int, observation dims that *encode* the target (masked out of the
+  energy's input, as the original code did for the arm); empty for most envs.
+- ``goal_period``: ``float | None``; the goal dims are periodic with this period (Reacher angles: 2.0).
+- ``state_low`` / ``state_high``: ``np.ndarray`` [D] bounds of ``observation`` that a planner may clip to, or
+  ``None`` where the state is unbounded.
+- ``inverse_dynamics(states [B, D], next_states [B, D]) -> actions [B, A]``: batched ground-truth inverse
+  dynamics (exact for particle and maze, MuJoCo inverse dynamics for Reacher and Sawyer).
+"""
+
+from __future__ import annotations
+
+from gymnasium.envs.registration import register, registry
+
+ENV_IDS: dict[str, str] = {
+    "particle": "ebm/Particle-v0",
+    "maze": "ebm/Maze-v0",
+    "reacher": "ebm/Reacher-v0",
+    "sawyer": "ebm/SawyerReach-v0",
+}
+"""Short names used by the CLI and presets, mapped to registered ids."""
+
+
+def _register(env_id: str, entry_point: str, max_episode_steps: int) -> None:
+    if env_id not in registry:
+        register(id=env_id, entry_point=entry_point, max_episode_steps=max_episode_steps)
+
+
+_register("ebm/Particle-v0", "envs.particle:ParticleEnv", 100)
+_register("ebm/Maze-v0", "envs.maze:MazeEnv", 1000)
+_register("ebm/Reacher-v0", "envs.reacher:ReacherEnv", 50)
+_register("ebm/SawyerReach-v0", "envs.sawyer:SawyerReachEnv", 1000)
+
+
+def resolve_env_id(name: str) -> str:
+    """Map a short name (``particle``, ``maze``, ``reacher``, ``sawyer``) or a registered id to a registered id.
+
+    :param name: short name or any Gymnasium id.
+    :return: the Gymnasium id to pass to ``gym.make``.
+    """
+    return ENV_IDS.get(name.lower(), name)
+
+
+__all__ = ["ENV_IDS", "resolve_env_id"]
