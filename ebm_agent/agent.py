@@ -1,0 +1,429 @@
+"""``EBMPlannerAgent``: online energy-based planning (Du, Lin & Mordatch, CoRL 2019, Algorithm 1) behind SB3's API."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch
+from stable_baselines3.common.logger import Figure
+from stable_baselines3.common.type_aliases import GymEnv
+
+from ebm_agent.base import PlannerAgentBase, Segment
+from ebm_agent.buffers import TransitionBuffer
+from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.costs import (
+    AccelerationPrior,
+    ExtraEnergy,
+    GaussianGoalEnergy,
+    GoalEnergy,
+    PlanCost,
+    RampedGoalEnergy,
+    RewardGoalEnergy,
+    VelocityPrior,
+)
+from ebm_agent.datasets import TransitionDataset, iterate_minibatches
+from ebm_agent.energy import EnergyConfig, EnergyModel
+from ebm_agent.inverse_dynamics import InverseDynamics
+from ebm_agent.langevin import LangevinConfig, LangevinPlanner
+from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss
+from ebm_agent.mppi import MPPIConfig, MPPIPlanner
+from ebm_agent.planner import Planner
+from ebm_agent.policy import PlanningPolicy
+
+SelfEBMPlannerAgent = TypeVar("SelfEBMPlannerAgent", bound="EBMPlannerAgent")
+
+GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
+    "gaussian": GaussianGoalEnergy,  # paper Eq. 6: (s_T - g)^2
+    "ramped": RampedGoalEnergy,  # the original code: ((t/T)^2 (s_t - g))^2 over the whole plan
+    "reward": RewardGoalEnergy.negative_l1,  # max-ent form (paper Sec. 3.2): -sum_t R(s_t) with R = -L1
+}
+"""Goal energies by name; pass an instance to ``cost=`` for anything else."""
+
+PLANNERS: dict[str, tuple[type, type]] = {"mppi": (MPPIPlanner, MPPIConfig), "langevin": (LangevinPlanner, LangevinConfig)}
+"""Planners by name with their config types."""
+
+
+@dataclass
+class CostConfig:
+    """The plan cost besides the learned energy; defaults follow the original code (§3).
+
+    :param goal_energy: ``"gaussian"`` (paper Eq. 6), ``"ramped"`` (the original's time-ramped goal over every
+        state) or ``"reward"`` (maximum-entropy form with R = -L1 distance to the goal).
+    :param goal_weight: weight of the goal term (g_coeff).
+    :param eval_goal_weight: goal weight used by ``predict`` (the original evaluated the arm with 10); None = same.
+    :param velocity_weight: weight of the velocity prior (v_coeff).
+    :param acceleration_weight: weight of the acceleration prior (a_coeff).
+    """
+
+    goal_energy: str = "ramped"
+    goal_weight: float = 1.0
+    eval_goal_weight: float | None = None
+    velocity_weight: float = 0.0
+    acceleration_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.goal_energy not in GOAL_ENERGIES:
+            raise ValueError(f"CostConfig.goal_energy must be one of {sorted(GOAL_ENERGIES)}, got {self.goal_energy!r}.")
+        for name in ("goal_weight", "velocity_weight", "acceleration_weight"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"CostConfig.{name} must be >= 0, got {getattr(self, name)!r}.")
+
+
+class EBMPlannerAgent(PlannerAgentBase):
+    """Model-based planning with an energy-based dynamics model E(s_t, s_{t+1}), learned online.
+
+    The agent samples state trajectories with MPPI (or Langevin dynamics) under the energy plus a goal energy,
+    turns them into actions with an inverse-dynamics model, executes them until the real states deviate from the
+    plan, then takes one contrastive gradient step: real transitions down, planned transitions up (Algorithm 1).
+
+    Example::
+
+        import gymnasium as gym, envs
+        from ebm_agent import EBMPlannerAgent
+        agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=0)
+        agent.learn(total_timesteps=50_000)
+
+    :param policy: ``"MultiInputPolicy"``.
+    :param env: a goal-conditioned env, its id, or a VecEnv.
+    :param learning_rate: Adam learning rate (1e-3).
+    :param horizon: T, planned transitions per plan (10).
+    :param planner: ``"mppi"`` or ``"langevin"``, or a :class:`~ebm_agent.planner.Planner` instance.
+    :param planner_config: :class:`MPPIConfig` / :class:`LangevinConfig` or a dict of its fields (its horizon is
+        replaced by ``horizon``).
+    :param energy: :class:`EnergyConfig` or a dict of its fields.
+    :param cost: :class:`CostConfig` or a dict of its fields.
+    :param loss: ``"cd"`` (the paper's contrastive loss) or ``"infonce"``.
+    :param l2_coeff: weight of the energy-magnitude regulariser of the CD loss (1.0).
+    :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
+    :param online: :class:`OnlineConfig` or a dict of its fields.
+    :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"`` or an instance.
+    :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
+        states only); 0 disables them.
+    :param stats_window_size: episodes averaged for ``rollout/*``.
+    :param tensorboard_log: TensorBoard folder.
+    :param verbose: verbosity.
+    :param seed: seed.
+    :param device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
+    """
+
+    default_tb_log_name: ClassVar[str] = "EBM"
+
+    def __init__(
+        self,
+        policy: str | type[PlanningPolicy],
+        env: GymEnv | str | None,
+        learning_rate: float = 1e-3,
+        horizon: int = 10,
+        planner: str | Planner = "mppi",
+        planner_config: MPPIConfig | LangevinConfig | dict[str, Any] | None = None,
+        energy: EnergyConfig | dict[str, Any] | None = None,
+        cost: CostConfig | dict[str, Any] | None = None,
+        loss: str = "cd",
+        l2_coeff: float = 1.0,
+        clip_sigma: float | None = 3.0,
+        online: OnlineConfig | dict[str, Any] | None = None,
+        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        image_log_interval: int = 1000,
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: torch.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if isinstance(planner, str) and planner not in PLANNERS:
+            raise ValueError(f"planner must be one of {sorted(PLANNERS)} or a Planner instance, got {planner!r}.")
+        if loss not in ("cd", "infonce"):
+            raise ValueError(f"loss must be 'cd' (the paper's) or 'infonce', got {loss!r}.")
+        self.planner_kind = planner
+        if isinstance(planner, str):
+            config_type = PLANNERS[planner][1]
+            self.planner_config = make_config(config_type, planner_config, "planner_config")
+            self.planner_config.horizon = horizon
+        else:
+            self.planner_config = None
+        self.energy_config = make_config(EnergyConfig, energy, "energy")
+        self.cost_config = make_config(CostConfig, cost, "cost")
+        self.loss = loss
+        self.l2_coeff = l2_coeff
+        self.clip_sigma = clip_sigma
+        self.image_log_interval = image_log_interval
+        self.extra_energies: list[ExtraEnergy] = []
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            horizon=horizon,
+            online=online,
+            inverse_dynamics=inverse_dynamics,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        self.plan_iterations = int(getattr(self.planner_config, "iterations", 0) or 0)
+        self._energy_gaps: list[float] = []
+        if _init_setup_model:
+            self._setup_model()
+
+    # ------------------------------------------------------------------ setup
+    def _build_model(self) -> None:
+        spec = self.goal_spec
+        assert spec is not None
+        energy = EnergyModel(spec.state_dim, self.energy_config, masked_dims=spec.target_indices.tolist())
+        self.policy = PlanningPolicy(
+            self.observation_space,
+            self.action_space,
+            networks={"energy": energy},
+            learning_rate=self.lr_schedule(1.0),
+            clip_sigma=self.clip_sigma,
+        ).to(self.device)
+        self.neg_buffer = TransitionBuffer(self.online.neg_buffer_size, spec.state_dim, None, seed=self._base_seed() + 3)
+        if isinstance(self.planner_kind, str):
+            planner_type = PLANNERS[self.planner_kind][0]
+            self.planner = planner_type(
+                self.planner_config, spec.state_dim, state_low=spec.state_low, state_high=spec.state_high, device=self.device
+            )
+        else:
+            self.planner = self.planner_kind
+        cfg = self.cost_config
+        goal_energy = GOAL_ENERGIES[cfg.goal_energy](spec.goal_indices.tolist(), weight=cfg.goal_weight, period=spec.goal_period)
+        priors: list[ExtraEnergy] = []
+        model_dims = spec.model_dims.tolist()
+        if cfg.velocity_weight > 0:
+            priors.append(VelocityPrior(cfg.velocity_weight, dims=model_dims))
+        if cfg.acceleration_weight > 0:
+            priors.append(AccelerationPrior(cfg.acceleration_weight, dims=model_dims))
+        self.plan_cost = PlanCost(self.policy.energy, goal_energy, priors)
+
+    def _excluded_save_params(self) -> list[str]:
+        return [*super()._excluded_save_params(), "neg_buffer", "plan_cost", "extra_energies", "_energy_gaps"]
+
+    def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
+        names = ["policy", "policy.optimizer"]
+        module = getattr(self.inverse_model, "module", None)
+        if isinstance(module, torch.nn.Module):
+            names += ["inverse_model.module", "inverse_model.optimizer"]
+        return names, []
+
+    def set_plan_constraints(self, energies: Sequence[ExtraEnergy]) -> None:
+        """Add energies (e.g. :class:`~ebm_agent.costs.BoxObstacleEnergy`) to every later plan; [] removes them.
+
+        This is how a test-time obstacle the model never saw is handled (paper Sec. 4.3): planning in state space
+        composes it with the learned energy.
+
+        :param energies: callables ``plans [N, K, T+1, D] -> [N, K]``.
+        """
+        for energy in energies:
+            if not callable(energy):
+                raise TypeError(f"set_plan_constraints expects callables plans -> [N, K], got {energy!r}.")
+        self.extra_energies = list(energies)
+
+    # --------------------------------------------------------------- planning
+    def _plan(
+        self,
+        states: np.ndarray,
+        goals: np.ndarray,
+        init_plans: np.ndarray | None,
+        generator: torch.Generator,
+        training: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        cost = self.plan_cost.with_extra(*self.extra_energies) if self.extra_energies else self.plan_cost
+        warmup = self.online.prior_warmup_plans
+        cost.prior_scale = min(self.num_plans / warmup, 1.0) if (training and warmup > 0) else 1.0
+        goal_energy = cost.goal_energy
+        eval_weight = self.cost_config.eval_goal_weight
+        if goal_energy is not None:
+            goal_energy.weight = eval_weight if (eval_weight is not None and not training) else self.cost_config.goal_weight
+        start = torch.as_tensor(states, device=self.device)  # [n, D]
+        goal = torch.as_tensor(goals, device=self.device)  # [n, G]
+        init = None if init_plans is None else torch.as_tensor(init_plans, device=self.device)  # [n, T+1, D]
+        self.policy.set_training_mode(False)
+        result = self.planner.plan(
+            start, goal, cost, init_plan=init, generator=generator, iterations=self.plan_iterations or None
+        )
+        plans = result.plans  # [n, T+1, D]
+        with torch.no_grad():
+            transition_energy = self.policy.energy(plans[:, :-1], plans[:, 1:]).mean(dim=1)  # [n]
+        return plans.cpu().numpy().astype(np.float32), None, transition_energy.cpu().numpy()
+
+    # --------------------------------------------------------------- training
+    def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
+        positives = self._replay_positives(self._fresh_positives(segments))
+        # Negatives: the planned transitions that were attempted, up to and including the one that deviated; the
+        # planned transitions after the deviation are ignored (paper Sec. 3.3).
+        neg_states = np.concatenate([s.planned[:-1] for s in segments])  # [M, D]
+        neg_next = np.concatenate([s.planned[1:] for s in segments])  # [M, D]
+        neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
+        stats = self._gradient_step(positives.states, positives.next_states, neg_states, neg_next)
+        if self.inverse_model is not None and positives.actions is not None:
+            stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(positives.states, positives.next_states, positives.actions).items()})
+        self._adapt_iterations(stats["energy_neg"] - stats["energy_pos"])
+        if self.image_log_interval and self._n_updates % self.image_log_interval == 0:
+            self._log_images(segments[0])
+        return stats
+
+    def _replay_negatives(self, states: np.ndarray, next_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Swap each fresh negative for a replayed one with probability ``neg_replay_prob``, then store the fresh ones.
+
+        The original re-added the mixed batch (duplicating replayed items); only fresh negatives are stored here.
+
+        :param states: [M, D] planned states.
+        :param next_states: [M, D] planned next states.
+        :return: the mixed negatives ([M, D], [M, D]).
+        """
+        mixed_states, mixed_next = states.copy(), next_states.copy()
+        count = len(states)
+        if len(self.neg_buffer) > count:
+            replay = self.neg_buffer.sample(count)
+            swap = self.neg_buffer.rng.random(count) < self.online.neg_replay_prob
+            mixed_states[swap], mixed_next[swap] = replay.states[swap], replay.next_states[swap]
+        self.neg_buffer.add(states, next_states)
+        return mixed_states, mixed_next
+
+    def _gradient_step(
+        self, pos_states: np.ndarray, pos_next: np.ndarray, neg_states: np.ndarray, neg_next: np.ndarray
+    ) -> dict[str, float]:
+        """One optimiser step on the contrastive loss; refuses to write non-finite weights.
+
+        :param pos_states: [P, D] real states.
+        :param pos_next: [P, D] real next states.
+        :param neg_states: [M, D] planned states.
+        :param neg_next: [M, D] planned next states.
+        :return: loss statistics.
+        :raises FloatingPointError: on a NaN/inf loss or gradient (the weights are left untouched).
+        """
+        energy = self.policy.energy
+        self.policy.set_training_mode(True)
+        as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
+        energy_pos = energy(as_tensor(pos_states), as_tensor(pos_next))  # [P]
+        energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
+        if self.loss == "cd":
+            loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+        else:
+            loss, stats = info_nce_loss(energy_pos, energy_neg)
+        optimizer = self.policy.optimizer
+        assert optimizer is not None
+        optimizer.zero_grad()
+        loss.backward()
+        grads_finite = all(torch.isfinite(p.grad).all() for p in energy.parameters() if p.grad is not None)
+        if not torch.isfinite(loss) or not grads_finite:
+            optimizer.zero_grad()
+            raise FloatingPointError(
+                f"The energy diverged (loss={loss.item()}) at update {self._n_updates}, timestep {self.num_timesteps}; "
+                "no update was applied, so the weights (and the last checkpoint) are the last finite ones. Try a lower "
+                "learning_rate, loss='cd' with l2_coeff >= 1, or energy={'spectral_norm': True}."
+            )
+        optimizer.step()
+        stats["energy_gap"] = stats["energy_neg"] - stats["energy_pos"]
+        return stats
+
+    def _adapt_iterations(self, gap: float) -> None:
+        """The original's adaptive planning budget: more iterations while negatives stay far above positives."""
+        cfg = self.online
+        if not cfg.adaptive_iterations or not self.plan_iterations:
+            return
+        self._energy_gaps.append(gap)
+        if len(self._energy_gaps) >= cfg.adapt_every:
+            if float(np.mean(self._energy_gaps)) > cfg.adapt_gap:
+                self.plan_iterations = min(self.plan_iterations + cfg.adapt_increment, cfg.max_iterations)
+            self._energy_gaps = []
+        self.logger.record("plan/iterations", self.plan_iterations)
+
+    def learn_offline(
+        self: SelfEBMPlannerAgent,
+        dataset: TransitionDataset,
+        epochs: int = 10,
+        batch_size: int = 256,
+        sequential: bool = False,
+        num_candidates: int = 64,
+        negative_radius: float | np.ndarray | None = None,
+        log_interval: int = 1,
+        tb_log_name: str = "EBM_offline",
+    ) -> SelfEBMPlannerAgent:
+        """Pretrain the energy (and a learned inverse dynamics) on a fixed dataset of transitions (paper Sec. 4.2).
+
+        Negatives for a real (s, s') are model samples: ``num_candidates`` next states s + U(-r, r) scored by the
+        current energy, the lowest-energy one kept (the original's ``num_steps > 0`` MPPI refinement of negatives),
+        mixed 50/50 with replayed negatives.
+
+        :param dataset: the transitions (e.g. from :func:`~ebm_agent.datasets.collect_random_transitions`).
+        :param epochs: passes over the dataset (10 as the original).
+        :param batch_size: transitions per gradient step (256).
+        :param sequential: contiguous, correlated minibatches (the "directed + sequential" ablation).
+        :param num_candidates: candidate next states per positive for the negative sample.
+        :param negative_radius: half-width r of the candidate box per state dim; default 2x the largest |s' - s|.
+        :param log_interval: epochs between log dumps.
+        :param tb_log_name: TensorBoard run name.
+        :return: self.
+        """
+        if len(dataset) == 0:
+            raise ValueError("learn_offline got an empty dataset.")
+        spec = self.goal_spec
+        assert spec is not None
+        if dataset.states.shape[1] != spec.state_dim:
+            raise ValueError(f"The dataset's states have {dataset.states.shape[1]} dims, the model expects {spec.state_dim}.")
+        from stable_baselines3.common.utils import configure_logger
+
+        if not self._custom_logger:
+            self._logger = configure_logger(self.verbose, self.tensorboard_log, tb_log_name, True)
+        radius = 2.0 * np.abs(dataset.next_states - dataset.states).max(axis=0) if negative_radius is None else negative_radius
+        radius_t = torch.as_tensor(np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device)
+        rng = np.random.default_rng(self._base_seed())
+        start = time.perf_counter()
+        for epoch in range(epochs):
+            for index in iterate_minibatches(dataset, batch_size, rng, sequential=sequential):
+                states, next_states = dataset.states[index], dataset.next_states[index]
+                negatives = self._sample_negatives(states, radius_t, num_candidates)
+                neg_states, neg_next = self._replay_negatives(states, negatives)
+                stats = self._gradient_step(states, next_states, neg_states, neg_next)
+                if self.inverse_model is not None:
+                    stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(states, next_states, dataset.actions[index]).items()})
+                self._n_updates += 1
+                for key, value in stats.items():
+                    self.logger.record_mean(f"train/{key}", value)
+            if log_interval and (epoch + 1) % log_interval == 0:
+                self.logger.record("train/epoch", epoch + 1)
+                self.logger.record("time/time_elapsed", int(time.perf_counter() - start), exclude="tensorboard")
+                self.logger.dump(step=self._n_updates)
+        return self
+
+    def _sample_negatives(self, states: np.ndarray, radius: torch.Tensor, num_candidates: int) -> np.ndarray:
+        """Lowest-energy next state among random candidates around each state: a one-step model sample.
+
+        :param states: [B, D].
+        :param radius: [D] half-width of the candidate box.
+        :param num_candidates: C.
+        :return: [B, D] negative next states.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        start = torch.as_tensor(states, device=self.device)  # [B, D]
+        noise = (torch.rand(len(states), num_candidates, spec.state_dim, generator=self._generator, device=self.device) * 2 - 1)
+        candidates = start[:, None, :] + noise * radius  # [B, C, D]
+        if spec.state_low is not None and spec.state_high is not None:
+            low = torch.as_tensor(spec.state_low, device=self.device)
+            high = torch.as_tensor(spec.state_high, device=self.device)
+            candidates = torch.maximum(torch.minimum(candidates, high), low)
+        with torch.no_grad():
+            energies = self.policy.energy(start[:, None, :].expand_as(candidates), candidates)  # [B, C]
+        best = energies.argmin(dim=1)  # [B]
+        return candidates[torch.arange(len(states)), best].cpu().numpy()
+
+    # ----------------------------------------------------------- diagnostics
+    def _log_images(self, segment: Segment) -> None:
+        """TensorBoard figure of the energy landscape with the latest plan and its real execution (2-D states)."""
+        spec = self.goal_spec
+        assert spec is not None
+        if spec.state_dim != 2 or spec.state_low is None or spec.state_high is None:
+            return
+        from ebm_agent.visualize import plan_figure
+
+        figure = plan_figure(self.policy.energy, spec.state_low, spec.state_high, segment.planned, segment.real_next_states)
+        self.logger.record("plan/energy_map", Figure(figure, close=True), exclude=("stdout", "log", "json", "csv"))

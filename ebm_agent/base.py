@@ -1,0 +1,503 @@
+"""The online plan-execute-train loop (Algorithm 1) and the SB3 surface shared by the planning agents.
+
+A subclass supplies the model-specific parts: how to plan (:meth:`PlannerAgentBase._plan`) and how to take a
+gradient step on a finished plan segment (:meth:`PlannerAgentBase._train_on_segments`). Everything else, the
+step budget, per-env deviation handling, warm starts, replay of real transitions, callbacks, logging, ``predict``
+with the plan carried in ``state``, lives here so the EBM agent and the Action FF baseline behave identically.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any, ClassVar, TypeVar
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
+from stable_baselines3.common.utils import safe_mean
+
+from ebm_agent.buffers import TransitionBatch, TransitionBuffer
+from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces, env_inverse_dynamics, read_goal_spec
+from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
+from ebm_agent.planner import shift_plan
+from ebm_agent.policy import PlanningPolicy
+
+SelfPlannerAgent = TypeVar("SelfPlannerAgent", bound="PlannerAgentBase")
+
+PlanState = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""``predict``'s recurrent state: (plans [N, T+1, D], planned actions [N, T, A] (NaN when actions come from
+inverse dynamics), steps executed [N])."""
+
+
+@dataclass
+class Segment:
+    """A finished stretch of one plan's execution: the training data of one Algorithm-1 iteration.
+
+    :param planned: [k+1, D] the planned states that were attempted (start, then one per executed step).
+    :param real_states: [k, D] real states before each executed step.
+    :param real_next_states: [k, D] real states after each executed step.
+    :param actions: [k, A] executed actions.
+    """
+
+    planned: np.ndarray
+    real_states: np.ndarray
+    real_next_states: np.ndarray
+    actions: np.ndarray
+
+
+class PlannerAgentBase(BaseAlgorithm):
+    """Base class of agents that plan a state trajectory, act along it and learn their model online.
+
+    :param policy: ``"MultiInputPolicy"`` (the only alias; the networks are built by the subclass).
+    :param env: a goal-conditioned env (Dict observation with observation/achieved_goal/desired_goal), its id, or a
+        VecEnv of several.
+    :param learning_rate: learning rate of the model's optimiser.
+    :param horizon: T, number of planned transitions.
+    :param online: :class:`OnlineConfig` (or a dict of its fields).
+    :param inverse_dynamics: ``"ground_truth"`` (the env's ``inverse_dynamics``), ``"mlp"`` (learned), ``"rls"``
+        (recursive least squares) or an :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance.
+    :param stats_window_size: episodes averaged for ``rollout/*`` logs.
+    :param tensorboard_log: folder of TensorBoard runs (None: no TensorBoard).
+    :param verbose: 0 silent, 1 info, 2 debug.
+    :param seed: seed of numpy, torch, the env, the buffers and the planner's noise.
+    :param device: ``"auto"``, ``"cpu"`` or ``"cuda"``.
+    :param _init_setup_model: build the networks now (``load`` passes False).
+    """
+
+    policy_aliases: ClassVar[dict[str, type[PlanningPolicy]]] = {"MultiInputPolicy": PlanningPolicy}
+    default_tb_log_name: ClassVar[str] = "Planner"
+    policy: PlanningPolicy
+
+    def __init__(
+        self,
+        policy: str | type[PlanningPolicy],
+        env: GymEnv | str | None,
+        learning_rate: float = 1e-3,
+        horizon: int = 10,
+        online: OnlineConfig | dict[str, Any] | None = None,
+        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: torch.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        if env is not None and not isinstance(env, str):
+            check_spaces(env.observation_space, env.action_space, owner=type(self).__name__)
+        super().__init__(
+            policy=policy,
+            env=env,
+            learning_rate=learning_rate,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            support_multi_env=True,
+            monitor_wrapper=True,
+            seed=seed,
+            supported_action_spaces=(spaces.Box,),
+        )
+        if not isinstance(horizon, int) or horizon < 1:
+            raise ValueError(f"horizon must be a positive int (number of planned transitions), got {horizon!r}.")
+        self.horizon = horizon
+        self.online = make_config(OnlineConfig, online, "online")
+        self.inverse_dynamics_kind = inverse_dynamics
+        self.goal_spec: GoalSpec | None = None
+        self.num_plans = 0
+        self._n_updates = 0
+        if _init_setup_model:
+            self._setup_model()
+
+    # ------------------------------------------------------------------ setup
+    def _setup_model(self) -> None:
+        """Build the networks, planner, buffers and inverse dynamics from the (possibly loaded) attributes."""
+        self._setup_lr_schedule()
+        self.set_random_seed(self.seed)
+        if self.goal_spec is None:
+            if self.env is None:
+                raise ValueError(f"{type(self).__name__} needs an env to read the state/goal layout from.")
+            self.goal_spec = read_goal_spec(self.env)
+        spec = self.goal_spec
+        self._generator = torch.Generator(device=self.device)
+        self._generator.manual_seed(self._base_seed())
+        self.pos_buffer = TransitionBuffer(
+            self.online.pos_buffer_size, spec.state_dim, spec.action_dim, seed=self._base_seed() + 1
+        )
+        self._build_model()
+        self._build_inverse_dynamics()
+
+    def _base_seed(self) -> int:
+        return 0 if self.seed is None else int(self.seed)
+
+    def _build_model(self) -> None:
+        """Create ``self.policy`` (networks + optimiser) and the planner. Implemented by subclasses."""
+        raise NotImplementedError
+
+    def _build_inverse_dynamics(self) -> None:
+        spec = self.goal_spec
+        assert spec is not None
+        kind = self.inverse_dynamics_kind
+        if not isinstance(kind, str):
+            self.inverse_model: InverseDynamics | None = kind
+            return
+        fn = env_inverse_dynamics(self.env) if (kind == "ground_truth" and self.env is not None) else None
+        if kind == "ground_truth" and fn is None:
+            # No env (a model loaded for prediction only) or an env without ground truth: resolved at first use.
+            self.inverse_model = None
+            return
+        # Learned models never see the target dims (like the energy), and start from the agent's seed.
+        options: dict[str, Any] = {
+            "ground_truth": {},
+            "mlp": {"device": self.device, "seed": self._base_seed() + 2, "masked_dims": spec.target_indices.tolist()},
+            "rls": {"state_dims": spec.model_dims.tolist()},
+        }.get(kind, {})
+        self.inverse_model = make_inverse_dynamics(
+            kind,
+            action_low=spec.action_low,
+            action_high=spec.action_high,
+            state_dim=spec.state_dim,
+            action_dim=spec.action_dim,
+            fn=fn,
+            **options,
+        )
+
+    def _require_inverse_dynamics(self) -> InverseDynamics:
+        if self.inverse_model is None:
+            raise RuntimeError(
+                f"{type(self).__name__} uses ground-truth inverse dynamics, which come from the env, but it has none "
+                "(or the env has no `inverse_dynamics`). Pass the env: `Agent.load(path, env=env)` or "
+                "`agent.set_env(env)`, or choose inverse_dynamics='mlp' or 'rls'."
+            )
+        return self.inverse_model
+
+    def set_env(self, env: GymEnv, force_reset: bool = True) -> None:
+        """Set a new env (same spaces and number of envs); re-binds ground-truth inverse dynamics to it.
+
+        :param env: the env.
+        :param force_reset: reset it before the next ``learn``.
+        """
+        check_spaces(env.observation_space, env.action_space, owner=type(self).__name__)
+        super().set_env(env, force_reset=force_reset)
+        if self.inverse_dynamics_kind == "ground_truth":
+            self._build_inverse_dynamics()
+
+    def _excluded_save_params(self) -> list[str]:
+        return [
+            *super()._excluded_save_params(),
+            "pos_buffer",
+            "inverse_model",
+            "planner",
+            "_generator",
+        ]
+
+    # --------------------------------------------------------- model hooks
+    def _plan(
+        self,
+        states: np.ndarray,
+        goals: np.ndarray,
+        init_plans: np.ndarray | None,
+        generator: torch.Generator,
+        training: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """Plan for a batch of envs. Implemented by subclasses.
+
+        :param states: [n, D] current real states.
+        :param goals: [n, G] desired goals.
+        :param init_plans: [n, T+1, D] warm starts, or None to start from the current states.
+        :param generator: the noise source.
+        :param training: True inside ``learn`` (the goal/prior warm-up applies).
+        :return: (plans [n, T+1, D], planned actions [n, T, A] or None (use inverse dynamics),
+            mean model cost per transition [n]).
+        """
+        raise NotImplementedError
+
+    def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
+        """One gradient step on finished plan segments. Implemented by subclasses.
+
+        :param segments: the segments that ended at this env step.
+        :return: scalars to log under ``train/``.
+        """
+        raise NotImplementedError
+
+    # ---------------------------------------------------------------- acting
+    def _actions(
+        self, states: np.ndarray, plans: np.ndarray, planned_actions: np.ndarray, steps: np.ndarray
+    ) -> np.ndarray:
+        """Actions for step ``steps`` of each env's plan: planned ones, or inverse dynamics toward the next state.
+
+        :param states: [N, D] real states.
+        :param plans: [N, T+1, D].
+        :param planned_actions: [N, T, A] (NaN rows where the model plans states only).
+        :param steps: [N] index of the step to take.
+        :return: [N, A] actions clipped to the action bounds.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        rows = np.arange(len(states))
+        actions = planned_actions[rows, steps].copy()
+        missing = np.isnan(actions).any(axis=1)
+        if missing.any():
+            inverse = self._require_inverse_dynamics()
+            origin = states if self.online.closed_loop else plans[rows, steps]
+            actions[missing] = inverse(origin[missing], plans[rows, steps + 1][missing])
+        return np.clip(actions, spec.action_low, spec.action_high).astype(np.float32)
+
+    def _deviation(self, real: np.ndarray, planned: np.ndarray, reduce: str) -> np.ndarray:
+        """Distance between real and planned states over the model dims (target dims excluded).
+
+        :param real: [N, D].
+        :param planned: [N, D].
+        :param reduce: "max" (training rule) or "mean" (evaluation rule).
+        :return: [N].
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        gap = np.abs(real - planned)[:, spec.model_dims]
+        return gap.max(axis=1) if reduce == "max" else gap.mean(axis=1)
+
+    def _as_batch(self, observation: Any) -> tuple[dict[str, np.ndarray], bool]:
+        if isinstance(observation, tuple) and len(observation) == 2 and isinstance(observation[1], dict):
+            raise ValueError(
+                "predict got an (obs, info) tuple: you passed the result of gymnasium's env.reset() directly. "
+                "Use `obs, info = env.reset()` and pass `obs`."
+            )
+        if not isinstance(observation, dict) or "observation" not in observation or "desired_goal" not in observation:
+            raise ValueError(
+                "predict expects a goal-conditioned Dict observation with keys 'observation' and 'desired_goal' "
+                f"(got {type(observation).__name__}). Wrap your env so it returns the GoalEnv dict."
+            )
+        spec = self.goal_spec
+        assert spec is not None
+        state = np.asarray(observation["observation"], dtype=np.float32)
+        goal = np.asarray(observation["desired_goal"], dtype=np.float32)
+        vectorized = state.ndim == 2
+        state, goal = state.reshape(-1, state.shape[-1]), goal.reshape(-1, goal.shape[-1])
+        if state.shape[1] != spec.state_dim or goal.shape[1] != spec.goal_dim or len(state) != len(goal):
+            raise ValueError(
+                f"predict: observation has shape {state.shape} and desired_goal {goal.shape}, but this model was built "
+                f"for D={spec.state_dim}, G={spec.goal_dim}. Is this the env the model was trained on?"
+            )
+        batch = {"observation": state, "desired_goal": goal}
+        check_finite_observation(batch, f"{type(self).__name__}.predict")
+        return batch, vectorized
+
+    def _fresh_generator(self, deterministic: bool) -> torch.Generator:
+        if not deterministic:
+            return self._generator
+        # A deterministic call re-seeds the planner's noise, so the same model and observation give the same action.
+        generator = torch.Generator(device=self.device)
+        generator.manual_seed(self._base_seed())
+        return generator
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """Plan (or follow the current plan) and return actions, as SB3's recurrent policies do.
+
+        The plan is carried in ``state``: pass back the returned state on the next call and set ``episode_start``
+        when an episode begins. A new plan is made for an env when it has none, its episode starts, its plan ran
+        out, or the real state drifted from the plan by more than ``online.replan_threshold`` (mean over dims).
+
+        :param observation: a Dict observation, single or batched ([N, ...]).
+        :param state: the state returned by the previous call (None: plan from scratch).
+        :param episode_start: [N] flags for envs whose episode just began.
+        :param deterministic: re-seed the planner's noise so the same model and observation give the same action.
+        :return: (actions [N, A] or [A] for a single observation, the new state).
+        """
+        batch, vectorized = self._as_batch(observation)
+        spec = self.goal_spec
+        assert spec is not None
+        states, goals = batch["observation"], batch["desired_goal"]
+        n, horizon = len(states), self.horizon
+        if state is not None and len(state) == 3 and state[0].shape[:2] == (n, horizon + 1):
+            plans, planned_actions, steps = (np.array(s, copy=True) for s in state)
+            steps = steps.astype(np.int64)
+        else:
+            plans = np.zeros((n, horizon + 1, spec.state_dim), dtype=np.float32)
+            planned_actions = np.full((n, horizon, spec.action_dim), np.nan, dtype=np.float32)
+            steps = np.full(n, horizon, dtype=np.int64)
+        need = steps >= horizon
+        if episode_start is not None:
+            need |= np.asarray(episode_start, dtype=bool).reshape(-1)
+        has_plan = ~need
+        if has_plan.any():
+            idx = np.where(has_plan)[0]
+            drift = self._deviation(states[idx], plans[idx, steps[idx]], reduce="mean")
+            need[idx[drift > self.online.replan_threshold]] = True
+        if need.any():
+            new_plans, new_actions, _ = self._plan(
+                states[need], goals[need], None, self._fresh_generator(deterministic), training=False
+            )
+            plans[need] = new_plans
+            planned_actions[need] = np.nan if new_actions is None else new_actions
+            steps[need] = 0
+        actions = self._actions(states, plans, planned_actions, steps)
+        new_state = (plans, planned_actions, steps + 1)
+        return (actions if vectorized else actions[0]), new_state
+
+    # -------------------------------------------------------------- learning
+    def learn(
+        self: SelfPlannerAgent,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 10,
+        tb_log_name: str | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfPlannerAgent:
+        """Learn the model online (Algorithm 1): plan, act until the real states deviate, train, repeat.
+
+        Stops at exactly ``total_timesteps`` transitions (summed over envs; it must be a multiple of ``n_envs``).
+
+        :param total_timesteps: number of environment transitions to consume.
+        :param callback: SB3 callback(s), called once per (vectorised) env step.
+        :param log_interval: finished episodes between log dumps.
+        :param tb_log_name: TensorBoard run name (default: the agent's name).
+        :param reset_num_timesteps: restart the step counter (False continues the TensorBoard curve).
+        :param progress_bar: show SB3's progress bar.
+        :return: self.
+        """
+        if not isinstance(total_timesteps, (int, np.integer)) or total_timesteps < 0:
+            raise ValueError(f"total_timesteps must be a non-negative int, got {total_timesteps!r}.")
+        if total_timesteps % self.n_envs != 0:
+            raise ValueError(
+                f"total_timesteps={total_timesteps} is not a multiple of n_envs={self.n_envs}: every env step consumes "
+                f"{self.n_envs} transitions, so the budget could not be met exactly. Use a multiple of {self.n_envs}."
+            )
+        if self.env is None:
+            raise ValueError("learn() needs an env: pass it to the constructor, to load(path, env=...), or set_env().")
+        total, callback = self._setup_learn(
+            int(total_timesteps), callback, reset_num_timesteps, tb_log_name or self.default_tb_log_name, progress_bar
+        )
+        callback.on_training_start(locals(), globals())
+        self._run_online(total, callback, log_interval)
+        callback.on_training_end()
+        return self
+
+    def _run_online(self, total_timesteps: int, callback: BaseCallback, log_interval: int) -> None:
+        env = self.env
+        spec = self.goal_spec
+        assert env is not None and spec is not None and self._last_obs is not None
+        n, horizon = env.num_envs, self.horizon
+        plans = np.zeros((n, horizon + 1, spec.state_dim), dtype=np.float32)
+        planned_actions = np.full((n, horizon, spec.action_dim), np.nan, dtype=np.float32)
+        plan_cost = np.zeros(n, dtype=np.float32)
+        steps = np.zeros(n, dtype=np.int64)  # steps of the current plan executed so far
+        need = np.ones(n, dtype=bool)  # envs waiting for a new plan
+        warm = np.zeros(n, dtype=bool)  # ...that warm-start it from their previous plan, shifted by `shift`
+        shift = np.zeros(n, dtype=np.int64)
+        executed: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in range(n)]
+        episodes_at_dump = self._episode_num
+        while self.num_timesteps < total_timesteps:
+            obs = self._last_obs
+            assert isinstance(obs, dict)
+            check_finite_observation(obs, f"{type(self).__name__}.learn")
+            states = np.asarray(obs["observation"], dtype=np.float32)
+            goals = np.asarray(obs["desired_goal"], dtype=np.float32)
+            if need.any():
+                idx = np.where(need)[0]
+                init = None
+                if warm[idx].any():
+                    init = shift_plan(torch.from_numpy(plans[idx]), torch.from_numpy(shift[idx])).numpy()
+                    init[~warm[idx]] = states[idx][~warm[idx], None, :]
+                start = time.perf_counter()
+                new_plans, new_actions, cost = self._plan(states[idx], goals[idx], init, self._generator, training=True)
+                self.logger.record_mean("plan/ms", 1000.0 * (time.perf_counter() - start) / len(idx))
+                goal_gap = np.abs(new_plans[:, -1, spec.goal_indices] - goals[idx]).sum(axis=1)
+                self.logger.record_mean("plan/goal_dist", float(goal_gap.mean()))
+                plans[idx], plan_cost[idx], steps[idx], need[idx] = new_plans, cost, 0, False
+                planned_actions[idx] = np.nan if new_actions is None else new_actions
+                self.num_plans += len(idx)
+            actions = self._actions(states, plans, planned_actions, steps)
+            new_obs, rewards, dones, infos = env.step(actions)
+            self.num_timesteps += n
+            real_next = np.asarray(new_obs["observation"], dtype=np.float32).copy()  # type: ignore[index]
+            for i in np.where(dones)[0]:
+                # The VecEnv already reset this env: the true last state is in terminal_observation, never the
+                # next episode's first state (that pair would teach the model a teleport).
+                real_next[i] = infos[i]["terminal_observation"]["observation"]
+            rows = np.arange(n)
+            deviation = self._deviation(real_next, plans[rows, steps + 1], reduce="max")
+            for i in range(n):
+                executed[i].append((states[i], real_next[i], actions[i]))
+            steps += 1
+            ended = (steps >= horizon) | dones | (deviation > self.online.deviation_threshold)
+            segments = []
+            for i in np.where(ended)[0]:
+                seg_states, seg_next, seg_actions = (np.stack(col) for col in zip(*executed[i]))
+                segments.append(Segment(plans[i, : steps[i] + 1].copy(), seg_states, seg_next, seg_actions))
+                executed[i] = []
+                # Warm-start the next plan from this one unless the episode ended or the plan looked poor to the
+                # model (the original's re-initialisation rule, train.py:583-591).
+                warm[i] = (not dones[i]) and plan_cost[i] <= self.online.reinit_energy
+                shift[i], need[i] = steps[i], True
+            if segments:
+                stats = self._train_on_segments(segments)
+                self._n_updates += 1
+                for key, value in stats.items():
+                    self.logger.record_mean(f"train/{key}", value)
+            self._update_info_buffer(infos, dones)
+            self._episode_num += int(np.sum(dones))
+            self._last_obs = new_obs  # type: ignore[assignment]
+            self._last_episode_starts = dones
+            self._update_current_progress_remaining(self.num_timesteps, total_timesteps)
+            callback.update_locals(locals())
+            if not callback.on_step():
+                break
+            if log_interval and self._episode_num - episodes_at_dump >= log_interval:
+                episodes_at_dump = self._episode_num
+                self.dump_logs()
+        self.dump_logs()
+
+    def dump_logs(self) -> None:
+        """Write SB3's ``rollout/*`` and ``time/*`` keys plus the agent's own, then dump the logger."""
+        elapsed = max((time.time_ns() - self.start_time) / 1e9, 1e-9)
+        fps = int((self.num_timesteps - self._num_timesteps_at_start) / elapsed)
+        if self.ep_info_buffer:
+            self.logger.record("rollout/ep_rew_mean", safe_mean([ep["r"] for ep in self.ep_info_buffer]))
+            self.logger.record("rollout/ep_len_mean", safe_mean([ep["l"] for ep in self.ep_info_buffer]))
+        if self.ep_success_buffer:
+            self.logger.record("rollout/success_rate", safe_mean(self.ep_success_buffer))
+        self.logger.record("time/fps", fps)
+        self.logger.record("time/episodes", self._episode_num, exclude="tensorboard")
+        self.logger.record("time/time_elapsed", int(elapsed), exclude="tensorboard")
+        self.logger.record("time/total_timesteps", self.num_timesteps, exclude="tensorboard")
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        self.logger.record("plan/num_plans", self.num_plans)
+        self.logger.dump(step=self.num_timesteps)
+
+    def _replay_positives(self, fresh: TransitionBatch) -> TransitionBatch:
+        """Fresh real transitions plus as many replayed ones (the original's 50/50 positive batch), then store them.
+
+        :param fresh: the real transitions of the finished segments.
+        :return: the positive batch.
+        """
+        batch = fresh
+        if self.online.replay_positives and len(self.pos_buffer) > len(fresh.states):
+            replay = self.pos_buffer.sample(len(fresh.states))
+            assert fresh.actions is not None and replay.actions is not None
+            batch = TransitionBatch(
+                np.concatenate([fresh.states, replay.states]),
+                np.concatenate([fresh.next_states, replay.next_states]),
+                np.concatenate([fresh.actions, replay.actions]),
+            )
+        self.pos_buffer.add(fresh.states, fresh.next_states, fresh.actions)
+        return batch
+
+    @staticmethod
+    def _fresh_positives(segments: list[Segment]) -> TransitionBatch:
+        return TransitionBatch(
+            np.concatenate([s.real_states for s in segments]),
+            np.concatenate([s.real_next_states for s in segments]),
+            np.concatenate([s.actions for s in segments]),
+        )

@@ -1,0 +1,83 @@
+"""Typed configuration of the online loop (Algorithm 1) shared by the planning agents."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Any, TypeVar
+
+T = TypeVar("T")
+
+
+@dataclass
+class OnlineConfig:
+    """How the agent acts, when it replans and what it trains on; defaults follow the original code (§2, §5, §8).
+
+    :param deviation_threshold: during ``learn``, a plan ends when max |planned - real| over the model dims exceeds
+        this (0.7 in the original for 2-D envs and Reacher; set it per env, e.g. lower for the arm).
+    :param replan_threshold: during ``predict``, replan when mean |planned - real| exceeds this (0.55 for 2-D and
+        Reacher, 0.3 for the arm in the original's evaluation) or the plan runs out.
+    :param closed_loop: compute each action from the *real* current state to the next planned state (True) instead
+        of from planned state to planned state (the original's training mode).
+    :param pos_buffer_size: capacity of the real-transition replay buffer (1e6).
+    :param neg_buffer_size: capacity of the planned-transition replay buffer (1e4).
+    :param neg_replay_prob: probability that a fresh negative is swapped for a replayed one (0.5).
+    :param replay_positives: add as many replayed positives as fresh ones (the original's 50/50 batch).
+    :param prior_warmup_plans: number of plans over which the goal and prior weights ramp from 0 to 1 during
+        ``learn`` (the original's ``l2_weight = min(itr / 200, 1)``); 0 disables the warm-up.
+    :param adaptive_iterations: grow the planner's iteration count during ``learn`` when the energy gap
+        (mean E- - mean E+) stays above ``adapt_gap`` (the original: +20 every 10 steps, capped at 800).
+    :param adapt_every: gradient steps between adaptation checks.
+    :param adapt_gap: energy gap above which iterations grow.
+    :param adapt_increment: iterations added per growth.
+    :param max_iterations: cap on the planner's iterations.
+    :param reinit_energy: re-initialise (instead of warm-start) a plan whose mean transition energy exceeds this.
+    :param train_every_plan: take one gradient step per finished plan segment (Algorithm 1).
+    """
+
+    deviation_threshold: float = 0.7
+    replan_threshold: float = 0.55
+    closed_loop: bool = True
+    pos_buffer_size: int = 1_000_000
+    neg_buffer_size: int = 10_000
+    neg_replay_prob: float = 0.5
+    replay_positives: bool = True
+    prior_warmup_plans: int = 200
+    adaptive_iterations: bool = True
+    adapt_every: int = 10
+    adapt_gap: float = 0.15
+    adapt_increment: int = 20
+    max_iterations: int = 800
+    reinit_energy: float = 1.0
+    train_every_plan: bool = True
+
+    def __post_init__(self) -> None:
+        for name in ("deviation_threshold", "replan_threshold"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
+        if not 0.0 <= self.neg_replay_prob <= 1.0:
+            raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
+        for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"OnlineConfig.{name} must be >= 1, got {getattr(self, name)!r}.")
+
+
+def make_config(cls: type[T], value: T | dict[str, Any] | None, owner: str) -> T:
+    """Build a config dataclass from an instance, a dict of its fields, or None (defaults).
+
+    :param cls: the dataclass type.
+    :param value: an instance, a dict, or None.
+    :param owner: the parameter name, for messages.
+    :return: an instance of ``cls``.
+    :raises TypeError: for unknown keys (listing the valid ones) or a value of another type.
+    """
+    if value is None:
+        return cls()
+    if isinstance(value, cls):
+        return value
+    if isinstance(value, dict):
+        valid = {f.name for f in fields(cls)}  # type: ignore[arg-type]
+        unknown = sorted(set(value) - valid)
+        if unknown:
+            raise TypeError(f"{owner}: unknown keys {unknown} for {cls.__name__}; valid keys are {sorted(valid)}.")
+        return cls(**value)
+    raise TypeError(f"{owner} must be a {cls.__name__}, a dict of its fields, or None; got {type(value).__name__}.")

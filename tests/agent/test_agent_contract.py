@@ -1,0 +1,217 @@
+"""SB3 contract tests for the planning agents (sb3-contrib's test_run / test_save_load style), parametrised over agents."""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+import envs  # noqa: F401  (registers the ids)
+from ebm_agent import EBMPlannerAgent
+
+# Tiny planners keep every test to a second or two; the behaviour under test does not depend on their size.
+FAST_KWARGS = {
+    EBMPlannerAgent: {
+        "horizon": 5,
+        "planner_config": {"num_samples": 16, "iterations": 4},
+        "online": {"adaptive_iterations": False, "pos_buffer_size": 10_000},
+        "image_log_interval": 0,
+    },
+}
+AGENTS = list(FAST_KWARGS)
+
+
+def make_agent(agent_class, env, **kwargs):
+    """An agent of ``agent_class`` with the fast settings."""
+    return agent_class("MultiInputPolicy", env, seed=0, **{**FAST_KWARGS[agent_class], **kwargs})
+
+
+class CountingCallback(BaseCallback):
+    """Counts on_step calls."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.calls = 0
+
+    def _on_step(self) -> bool:
+        self.calls += 1
+        return True
+
+
+class StopAfter(BaseCallback):
+    """Stops training after ``n`` steps."""
+
+    def __init__(self, n: int) -> None:
+        super().__init__()
+        self.n = n
+
+    def _on_step(self) -> bool:
+        return self.n_calls < self.n
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+@pytest.mark.parametrize("budget", [1, 37, 120])
+def test_exact_step_budget_and_one_callback_per_transition(agent_class, budget):
+    agent = make_agent(agent_class, gym.make("ebm/Particle-v0"))
+    counter = CountingCallback()
+    agent.learn(budget, callback=counter)
+    assert agent.num_timesteps == budget
+    assert counter.calls == budget
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_exact_budget_with_several_envs_and_non_multiple_rejected(agent_class):
+    vec = DummyVecEnv([lambda: gym.make("ebm/Particle-v0")] * 3)
+    agent = make_agent(agent_class, vec)
+    agent.learn(60)
+    assert agent.num_timesteps == 60
+    with pytest.raises(ValueError, match="multiple of n_envs"):
+        agent.learn(61)
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_learn_continues_counter_and_callback_can_stop(agent_class):
+    agent = make_agent(agent_class, gym.make("ebm/Particle-v0"))
+    agent.learn(30)
+    agent.learn(20, reset_num_timesteps=False)
+    assert agent.num_timesteps == 50
+    agent.learn(100, callback=StopAfter(7))
+    assert agent.num_timesteps == 7
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_save_load_gives_identical_deterministic_predict(agent_class, tmp_path):
+    env = gym.make("ebm/Particle-v0")
+    agent = make_agent(agent_class, env)
+    agent.learn(60)
+    obs, _ = env.reset(seed=3)
+    action, state = agent.predict(obs, deterministic=True)
+    again, _ = agent.predict(obs, deterministic=True)
+    np.testing.assert_array_equal(action, again)
+    assert action.shape == env.action_space.shape
+    path = tmp_path / "agent.zip"
+    agent.save(path)
+    loaded = agent_class.load(path, env=gym.make("ebm/Particle-v0"))
+    loaded_action, _ = loaded.predict(obs, deterministic=True)
+    np.testing.assert_array_equal(action, loaded_action)
+    assert loaded.num_timesteps == agent.num_timesteps
+    for (name, p1), (_, p2) in zip(agent.policy.state_dict().items(), loaded.policy.state_dict().items()):
+        assert np.array_equal(p1.cpu().numpy(), p2.cpu().numpy()), name
+    loaded.learn(10)  # a loaded agent keeps learning
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_set_env_and_mismatched_env_rejected(agent_class, tmp_path):
+    agent = make_agent(agent_class, gym.make("ebm/Particle-v0"))
+    agent.set_env(gym.make("ebm/Particle-v0", goal=(-0.5, 0.2)))
+    agent.learn(10)
+    agent.save(tmp_path / "a.zip")
+    with pytest.raises((ValueError, AssertionError)):
+        agent_class.load(tmp_path / "a.zip", env=gym.make("ebm/Reacher-v0"))
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_batched_predict_and_state_carry(agent_class):
+    vec = DummyVecEnv([lambda: gym.make("ebm/Particle-v0")] * 3)
+    agent = make_agent(agent_class, vec)
+    obs = vec.reset()
+    actions, state = agent.predict(obs, deterministic=True)
+    assert actions.shape == (3, 2)
+    assert np.all(np.abs(actions) <= 1.0)
+    plans, _, steps = state
+    assert plans.shape == (3, agent.horizon + 1, 2)
+    np.testing.assert_allclose(plans[:, 0], obs["observation"], atol=1e-6)  # the start is pinned
+    assert np.all(steps == 1)
+    _, state = agent.predict(obs, state=state, episode_start=np.zeros(3, dtype=bool), deterministic=True)
+    assert np.all(state[2] == 2)  # followed the same plan
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_evaluate_policy_and_sb3_callbacks(agent_class, tmp_path):
+    agent = make_agent(agent_class, gym.make("ebm/Particle-v0"))
+    eval_env = Monitor(gym.make("ebm/Particle-v0", start=(0.0, 0.0), goal=(0.5, 0.5)))
+    eval_cb = EvalCallback(eval_env, n_eval_episodes=1, eval_freq=40, log_path=str(tmp_path), verbose=0)
+    ckpt_cb = CheckpointCallback(save_freq=40, save_path=str(tmp_path / "ckpt"))
+    agent.learn(80, callback=[eval_cb, ckpt_cb])
+    data = np.load(tmp_path / "evaluations.npz")
+    assert list(data["timesteps"]) == [40, 80]
+    assert sorted(os.listdir(tmp_path / "ckpt")) == ["rl_model_40_steps.zip", "rl_model_80_steps.zip"]
+    rewards, lengths = evaluate_policy(agent, eval_env, n_eval_episodes=2, return_episode_rewards=True)
+    assert len(rewards) == 2 and all(np.isfinite(rewards))
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_tensorboard_keys(agent_class, tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    agent = make_agent(agent_class, gym.make("ebm/Particle-v0"), tensorboard_log=str(tmp_path))
+    agent.learn(250)  # > 2 episodes of 100 steps, so rollout/* is logged
+    runs = glob.glob(str(tmp_path / "*"))
+    assert len(runs) == 1
+    accumulator = EventAccumulator(runs[0])
+    accumulator.Reload()
+    tags = set(accumulator.Tags()["scalars"])
+    for key in ("rollout/ep_rew_mean", "time/fps", "train/loss", "plan/ms", "plan/goal_dist"):
+        assert key in tags, (key, tags)
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_seeded_runs_are_reproducible(agent_class):
+    def run(seed):
+        agent = agent_class("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=seed, **FAST_KWARGS[agent_class])
+        agent.learn(40)
+        obs, _ = gym.make("ebm/Particle-v0", start=(0.0, 0.0)).reset(seed=0)
+        return agent.predict(obs, deterministic=True)[0]
+
+    np.testing.assert_array_equal(run(1), run(1))
+    assert not np.array_equal(run(1), run(2))
+
+
+class NoGoalEnv(gym.Env):
+    """A Box-observation env (no goal keys)."""
+
+    observation_space = spaces.Box(-1, 1, (2,), np.float32)
+    action_space = spaces.Box(-1, 1, (2,), np.float32)
+
+    def reset(self, *, seed=None, options=None):
+        return np.zeros(2, np.float32), {}
+
+    def step(self, action):
+        return np.zeros(2, np.float32), 0.0, False, False, {}
+
+
+class DiscreteGoalEnv(NoGoalEnv):
+    """A goal env with Discrete actions."""
+
+    observation_space = spaces.Dict({k: spaces.Box(-1, 1, (2,), np.float32) for k in ("observation", "achieved_goal", "desired_goal")})
+    action_space = spaces.Discrete(4)
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_bad_spaces_and_inputs_give_clear_errors(agent_class):
+    with pytest.raises(TypeError, match="goal-conditioned Dict observation"):
+        agent_class("MultiInputPolicy", NoGoalEnv())
+    with pytest.raises(TypeError, match="Box action space"):
+        agent_class("MultiInputPolicy", DiscreteGoalEnv())
+    env = gym.make("ebm/Particle-v0")
+    agent = make_agent(agent_class, env)
+    obs, info = env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"\(obs, info\) tuple"):
+        agent.predict((obs, info))
+    bad = {k: v.copy() for k, v in obs.items()}
+    bad["observation"][0] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        agent.predict(bad)
+    wrong = {k: np.zeros(5, np.float32) for k in obs}
+    with pytest.raises(ValueError, match="built for D=2"):
+        agent.predict(wrong)
+    with pytest.raises(ValueError, match="total_timesteps"):
+        agent.learn(-5)
