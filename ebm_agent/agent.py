@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
@@ -25,7 +24,7 @@ from ebm_agent.costs import (
     RewardGoalEnergy,
     VelocityPrior,
 )
-from ebm_agent.datasets import TransitionDataset, iterate_minibatches
+from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
@@ -193,17 +192,28 @@ class EBMPlannerAgent(PlannerAgentBase):
         else:
             self.planner = self.planner_kind
         cfg = self.cost_config
-        goal_energy = GOAL_ENERGIES[cfg.goal_energy](spec.goal_indices.tolist(), weight=cfg.goal_weight, period=spec.goal_period)
+        goal_energy = GOAL_ENERGIES[cfg.goal_energy](
+            spec.goal_indices.tolist(), weight=cfg.goal_weight, period=spec.goal_period
+        )
         priors: list[ExtraEnergy] = []
         model_dims = spec.model_dims.tolist()
         if cfg.velocity_weight > 0:
             priors.append(VelocityPrior(cfg.velocity_weight, dims=model_dims))
         if cfg.acceleration_weight > 0:
             priors.append(AccelerationPrior(cfg.acceleration_weight, dims=model_dims))
-        self.plan_cost = PlanCost(self.policy.energy, goal_energy, priors)
+        # The original's gradient (Langevin) planner weighted transition t by T - t; MPPI used a plain sum.
+        weights = "linear_decay" if self.planner_kind == "langevin" else "uniform"
+        self.plan_cost = PlanCost(self.policy.energy, goal_energy, priors, transition_weights=weights)
 
     def _excluded_save_params(self) -> list[str]:
-        return [*super()._excluded_save_params(), "neg_buffer", "plan_cost", "extra_energies", "_energy_gaps"]
+        return [
+            *super()._excluded_save_params(),
+            "neg_buffer",
+            "plan_cost",
+            "extra_energies",
+            "_energy_gaps",
+            "_negative_radius",
+        ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
         names = ["policy", "policy.optimizer"]
@@ -263,7 +273,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
         stats = self._gradient_step(positives.states, positives.next_states, neg_states, neg_next)
         if self.inverse_model is not None and positives.actions is not None:
-            stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(positives.states, positives.next_states, positives.actions).items()})
+            stats.update(
+                {
+                    f"inverse_{k}": v
+                    for k, v in self.inverse_model.update(positives.states, positives.next_states, positives.actions).items()
+                }
+            )
         self._adapt_iterations(stats["energy_neg"] - stats["energy_pos"])
         if self.image_log_interval and self._n_updates % self.image_log_interval == 0:
             self._log_images(segments[0])
@@ -336,7 +351,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             self._energy_gaps = []
         self.logger.record("plan/iterations", self.plan_iterations)
 
-    def learn_offline(
+    def learn_offline(  # type: ignore[override]
         self: SelfEBMPlannerAgent,
         dataset: TransitionDataset,
         epochs: int = 10,
@@ -363,36 +378,22 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param tb_log_name: TensorBoard run name.
         :return: self.
         """
-        if len(dataset) == 0:
-            raise ValueError("learn_offline got an empty dataset.")
+        radius = 2.0 * np.abs(dataset.next_states - dataset.states).max(axis=0) if negative_radius is None else negative_radius
         spec = self.goal_spec
         assert spec is not None
-        if dataset.states.shape[1] != spec.state_dim:
-            raise ValueError(f"The dataset's states have {dataset.states.shape[1]} dims, the model expects {spec.state_dim}.")
-        from stable_baselines3.common.utils import configure_logger
+        self._negative_radius = torch.as_tensor(
+            np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device
+        )
+        self._num_candidates = num_candidates
+        return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
-        if not self._custom_logger:
-            self._logger = configure_logger(self.verbose, self.tensorboard_log, tb_log_name, True)
-        radius = 2.0 * np.abs(dataset.next_states - dataset.states).max(axis=0) if negative_radius is None else negative_radius
-        radius_t = torch.as_tensor(np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device)
-        rng = np.random.default_rng(self._base_seed())
-        start = time.perf_counter()
-        for epoch in range(epochs):
-            for index in iterate_minibatches(dataset, batch_size, rng, sequential=sequential):
-                states, next_states = dataset.states[index], dataset.next_states[index]
-                negatives = self._sample_negatives(states, radius_t, num_candidates)
-                neg_states, neg_next = self._replay_negatives(states, negatives)
-                stats = self._gradient_step(states, next_states, neg_states, neg_next)
-                if self.inverse_model is not None:
-                    stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(states, next_states, dataset.actions[index]).items()})
-                self._n_updates += 1
-                for key, value in stats.items():
-                    self.logger.record_mean(f"train/{key}", value)
-            if log_interval and (epoch + 1) % log_interval == 0:
-                self.logger.record("train/epoch", epoch + 1)
-                self.logger.record("time/time_elapsed", int(time.perf_counter() - start), exclude="tensorboard")
-                self.logger.dump(step=self._n_updates)
-        return self
+    def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+        negatives = self._sample_negatives(states, self._negative_radius, self._num_candidates)
+        neg_states, neg_next = self._replay_negatives(states, negatives)
+        stats = self._gradient_step(states, next_states, neg_states, neg_next)
+        if self.inverse_model is not None:
+            stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(states, next_states, actions).items()})
+        return stats
 
     def _sample_negatives(self, states: np.ndarray, radius: torch.Tensor, num_candidates: int) -> np.ndarray:
         """Lowest-energy next state among random candidates around each state: a one-step model sample.
@@ -405,7 +406,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         spec = self.goal_spec
         assert spec is not None
         start = torch.as_tensor(states, device=self.device)  # [B, D]
-        noise = (torch.rand(len(states), num_candidates, spec.state_dim, generator=self._generator, device=self.device) * 2 - 1)
+        noise = torch.rand(len(states), num_candidates, spec.state_dim, generator=self._generator, device=self.device) * 2 - 1
         candidates = start[:, None, :] + noise * radius  # [B, C, D]
         if spec.state_low is not None and spec.state_high is not None:
             low = torch.as_tensor(spec.state_low, device=self.device)

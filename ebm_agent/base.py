@@ -18,10 +18,11 @@ from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
-from stable_baselines3.common.utils import safe_mean
+from stable_baselines3.common.utils import configure_logger, safe_mean
 
 from ebm_agent.buffers import TransitionBatch, TransitionBuffer
 from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.datasets import TransitionDataset, iterate_minibatches
 from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces, env_inverse_dynamics, read_goal_spec
 from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
 from ebm_agent.planner import shift_plan
@@ -155,7 +156,9 @@ class PlannerAgentBase(BaseAlgorithm):
         options: dict[str, Any] = {
             "ground_truth": {},
             "mlp": {"device": self.device, "seed": self._base_seed() + 2, "masked_dims": spec.target_indices.tolist()},
-            "rls": {"state_dims": spec.model_dims.tolist()},
+            # A small ridge: the original's 0.3 swamps systems with small action gains (the particle moves 1/20 per
+            # unit action), pulling every solved action toward zero.
+            "rls": {"state_dims": spec.model_dims.tolist(), "ridge": 1e-6},
         }.get(kind, {})
         self.inverse_model = make_inverse_dynamics(
             kind,
@@ -226,9 +229,7 @@ class PlannerAgentBase(BaseAlgorithm):
         raise NotImplementedError
 
     # ---------------------------------------------------------------- acting
-    def _actions(
-        self, states: np.ndarray, plans: np.ndarray, planned_actions: np.ndarray, steps: np.ndarray
-    ) -> np.ndarray:
+    def _actions(self, states: np.ndarray, plans: np.ndarray, planned_actions: np.ndarray, steps: np.ndarray) -> np.ndarray:
         """Actions for step ``steps`` of each env's plan: planned ones, or inverse dynamics toward the next state.
 
         :param states: [N, D] real states.
@@ -475,6 +476,55 @@ class PlannerAgentBase(BaseAlgorithm):
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         self.logger.record("plan/num_plans", self.num_plans)
         self.logger.dump(step=self.num_timesteps)
+
+    def learn_offline(
+        self: SelfPlannerAgent,
+        dataset: TransitionDataset,
+        epochs: int = 10,
+        batch_size: int = 256,
+        sequential: bool = False,
+        log_interval: int = 1,
+        tb_log_name: str | None = None,
+    ) -> SelfPlannerAgent:
+        """Pretrain the model on a fixed dataset of transitions (the paper's "pretrained" setting, Sec. 4.2).
+
+        :param dataset: the transitions (e.g. from :func:`~ebm_agent.datasets.collect_random_transitions`).
+        :param epochs: passes over the dataset (10 as the original).
+        :param batch_size: transitions per gradient step (256).
+        :param sequential: contiguous, correlated minibatches (the "directed + sequential" ablation).
+        :param log_interval: epochs between log dumps.
+        :param tb_log_name: TensorBoard run name (default: the agent's name + "_offline").
+        :return: self.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        if len(dataset) == 0:
+            raise ValueError("learn_offline got an empty dataset.")
+        if dataset.states.shape[1] != spec.state_dim or dataset.actions.shape[1] != spec.action_dim:
+            raise ValueError(
+                f"The dataset has states of {dataset.states.shape[1]} dims and actions of {dataset.actions.shape[1]}, "
+                f"the model expects D={spec.state_dim}, A={spec.action_dim}: was it collected on another env?"
+            )
+        if not self._custom_logger:
+            name = tb_log_name or f"{self.default_tb_log_name}_offline"
+            self._logger = configure_logger(self.verbose, self.tensorboard_log, name, True)
+        rng = np.random.default_rng(self._base_seed())
+        start = time.perf_counter()
+        for epoch in range(epochs):
+            for index in iterate_minibatches(dataset, batch_size, rng, sequential=sequential):
+                stats = self._offline_step(dataset.states[index], dataset.next_states[index], dataset.actions[index])
+                self._n_updates += 1
+                for key, value in stats.items():
+                    self.logger.record_mean(f"train/{key}", value)
+            if log_interval and (epoch + 1) % log_interval == 0:
+                self.logger.record("train/epoch", epoch + 1)
+                self.logger.record("time/time_elapsed", int(time.perf_counter() - start), exclude="tensorboard")
+                self.logger.dump(step=self._n_updates)
+        return self
+
+    def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+        """One gradient step on a minibatch of dataset transitions ([B, D], [B, D], [B, A]). Implemented by subclasses."""
+        raise NotImplementedError
 
     def _replay_positives(self, fresh: TransitionBatch) -> TransitionBatch:
         """Fresh real transitions plus as many replayed ones (the original's 50/50 positive batch), then store them.

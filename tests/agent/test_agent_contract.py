@@ -15,6 +15,7 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 import envs  # noqa: F401  (registers the ids)
+from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
 
 # Tiny planners keep every test to a second or two; the behaviour under test does not depend on their size.
@@ -24,6 +25,11 @@ FAST_KWARGS = {
         "planner_config": {"num_samples": 16, "iterations": 4},
         "online": {"adaptive_iterations": False, "pos_buffer_size": 10_000},
         "image_log_interval": 0,
+    },
+    ActionFFAgent: {
+        "horizon": 5,
+        "planner_config": {"num_samples": 16, "iterations": 4},
+        "online": {"pos_buffer_size": 10_000},
     },
 }
 AGENTS = list(FAST_KWARGS)

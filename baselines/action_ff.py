@@ -1,0 +1,199 @@
+"""Action FF: the paper's action-conditioned feed-forward baseline, with the same API and online loop as the EBM agent."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from stable_baselines3.common.type_aliases import GymEnv
+from torch import Tensor, nn
+
+from baselines.action_planner import ActionPlanner, ActionPlannerConfig
+from ebm_agent.base import PlannerAgentBase, Segment
+from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.energy import EnergyConfig
+from ebm_agent.inverse_dynamics import InverseDynamics
+from ebm_agent.networks import build_mlp
+from ebm_agent.policy import PlanningPolicy
+
+
+class ForwardDynamicsModel(nn.Module):
+    """Deterministic f(s, a) -> s' on the energy model's trunk (same width, depth and activation).
+
+    :param state_dim: D.
+    :param action_dim: A.
+    :param config: the trunk's architecture (an :class:`~ebm_agent.energy.EnergyConfig`; its output options are
+        ignored).
+    :param masked_dims: target dims: zeroed in the input and copied unchanged to the prediction.
+    :param residual: predict s' = s + f(s, a) (True) or s' = f(s, a) as the original (False).
+    """
+
+    def __init__(
+        self,
+        state_dim: int,
+        action_dim: int,
+        config: EnergyConfig | None = None,
+        masked_dims: Sequence[int] = (),
+        residual: bool = False,
+    ) -> None:
+        super().__init__()
+        cfg = config or EnergyConfig()
+        self.state_dim, self.action_dim, self.residual = state_dim, action_dim, residual
+        self.net = build_mlp(
+            state_dim + action_dim,
+            state_dim,
+            hidden_dim=cfg.hidden_dim,
+            num_hidden_layers=cfg.num_hidden_layers,
+            activation=cfg.activation,
+            spectral_norm=cfg.spectral_norm,
+        )
+        keep = torch.ones(state_dim)
+        keep[list(masked_dims)] = 0.0
+        self.register_buffer("keep", keep)  # [D] 1 for modelled dims, 0 for target dims
+
+    def forward(self, states: Tensor, actions: Tensor) -> Tensor:
+        """Predict next states.
+
+        :param states: [..., D].
+        :param actions: [..., A].
+        :return: [..., D].
+        """
+        output = self.net(torch.cat([states * self.keep, actions], dim=-1))
+        predicted = states + output if self.residual else output
+        # Target dims are constants of the episode: copy them rather than predict them.
+        return self.keep * predicted + (1.0 - self.keep) * states
+
+
+class ActionFFAgent(PlannerAgentBase):
+    """The Action FF baseline: a learned f(s, a) -> s', planned through by MPPI over action sequences.
+
+    It shares the EBM agent's online loop (plan, act until the real states deviate from the predicted ones, train
+    on the real transitions with the same replay and the same step accounting), so the two differ only in the model
+    and the planner. Trained by MSE to the real next state.
+
+    :param policy: ``"MultiInputPolicy"``.
+    :param env: a goal-conditioned env, its id, or a VecEnv.
+    :param learning_rate: Adam learning rate (1e-3, beta1 = 0 as the original's main optimiser).
+    :param horizon: T, planned actions.
+    :param planner_config: :class:`~baselines.action_planner.ActionPlannerConfig` or a dict of its fields.
+    :param network: the trunk's :class:`~ebm_agent.energy.EnergyConfig` (same as the EBM's by default).
+    :param residual: predict state differences instead of absolute next states.
+    :param clip_sigma: the original Adam's per-element gradient clip; None for plain Adam.
+    :param online: :class:`~ebm_agent.config.OnlineConfig` or a dict of its fields.
+    :param inverse_dynamics: unused for acting (the plan has actions); kept for API symmetry.
+    :param stats_window_size: episodes averaged for ``rollout/*``.
+    :param tensorboard_log: TensorBoard folder.
+    :param verbose: verbosity.
+    :param seed: seed.
+    :param device: torch device.
+    """
+
+    default_tb_log_name: ClassVar[str] = "ActionFF"
+
+    def __init__(
+        self,
+        policy: str | type[PlanningPolicy],
+        env: GymEnv | str | None,
+        learning_rate: float = 1e-3,
+        horizon: int = 10,
+        planner_config: ActionPlannerConfig | dict[str, Any] | None = None,
+        network: EnergyConfig | dict[str, Any] | None = None,
+        residual: bool = False,
+        clip_sigma: float | None = 3.0,
+        online: OnlineConfig | dict[str, Any] | None = None,
+        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        stats_window_size: int = 100,
+        tensorboard_log: str | None = None,
+        verbose: int = 0,
+        seed: int | None = None,
+        device: torch.device | str = "auto",
+        _init_setup_model: bool = True,
+    ) -> None:
+        self.planner_config = make_config(ActionPlannerConfig, planner_config, "planner_config")
+        self.planner_config.horizon = horizon
+        self.network_config = make_config(EnergyConfig, network, "network")
+        self.residual = residual
+        self.clip_sigma = clip_sigma
+        super().__init__(
+            policy,
+            env,
+            learning_rate=learning_rate,
+            horizon=horizon,
+            online=online,
+            inverse_dynamics=inverse_dynamics,
+            stats_window_size=stats_window_size,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            seed=seed,
+            device=device,
+            _init_setup_model=False,
+        )
+        if _init_setup_model:
+            self._setup_model()
+
+    def _build_model(self) -> None:
+        spec = self.goal_spec
+        assert spec is not None
+        dynamics = ForwardDynamicsModel(
+            spec.state_dim, spec.action_dim, self.network_config, spec.target_indices.tolist(), self.residual
+        )
+        self.policy = PlanningPolicy(
+            self.observation_space,
+            self.action_space,
+            networks={"dynamics": dynamics},
+            learning_rate=self.lr_schedule(1.0),
+            clip_sigma=self.clip_sigma,
+        ).to(self.device)
+        self.planner = ActionPlanner(
+            self.planner_config, spec.action_low, spec.action_high, spec.goal_indices, device=self.device
+        )
+
+    def _plan(
+        self,
+        states: np.ndarray,
+        goals: np.ndarray,
+        init_plans: np.ndarray | None,
+        generator: torch.Generator,
+        training: bool,
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        # Action plans start from zero each time: the warm start the base class offers is in state space.
+        self.policy.set_training_mode(False)
+        start = torch.as_tensor(states, device=self.device)  # [n, D]
+        goal = torch.as_tensor(goals, device=self.device)  # [n, G]
+        predicted, actions, distance = self.planner.plan(self.policy.dynamics, start, goal, generator)
+        return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
+
+    def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+        """One MSE gradient step of f(s, a) toward s'.
+
+        :param states: [B, D].
+        :param next_states: [B, D].
+        :param actions: [B, A].
+        :return: ``{"loss": ...}``.
+        :raises FloatingPointError: on a non-finite loss (no update applied).
+        """
+        self.policy.set_training_mode(True)
+        model = self.policy.dynamics
+        as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
+        predicted = model(as_tensor(states), as_tensor(actions))  # [B, D]
+        loss = ((predicted - as_tensor(next_states)) ** 2).mean()
+        if not torch.isfinite(loss):
+            raise FloatingPointError(
+                f"The forward model diverged (loss={loss.item()}) at update {self._n_updates}; no update was applied."
+            )
+        optimizer = self.policy.optimizer
+        assert optimizer is not None
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        return {"loss": float(loss.item())}
+
+    def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
+        positives = self._replay_positives(self._fresh_positives(segments))
+        assert positives.actions is not None
+        return self._mse_step(positives.states, positives.next_states, positives.actions)
+
+    def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
+        return self._mse_step(states, next_states, actions)

@@ -1,0 +1,133 @@
+"""The energy model E(s_t, s_{t+1}): low energy for transitions the environment can make, high for the rest."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from torch import Tensor, nn
+from torch.nn.utils import parametrize
+
+from ebm_agent.networks import build_mlp, make_activation, normalise_dims
+
+__all__ = ["EnergyConfig", "EnergyModel"]
+
+
+@dataclass
+class EnergyConfig:
+    """
+    Architecture of the energy network; the defaults are the original code's (``traj_model.TrajNetLatentFC``).
+
+    :param hidden_dim: width of each hidden layer (128).
+    :param num_hidden_layers: number of hidden layers (3).
+    :param activation: ``"leaky_relu"`` (slope 0.2), ``"relu"``, ``"swish"``/``"silu"`` or ``"tanh"``.
+    :param spectral_norm: spectrally normalise the hidden layers (off at the original's HEAD).
+    :param positive_output: make the output layer bias-free with weights passed through ``abs()`` (the original's
+        ``get_weight(..., pos=True)``). The energy is then a non-negative combination of the last hidden features.
+    """
+
+    hidden_dim: int = 128
+    num_hidden_layers: int = 3
+    activation: str = "leaky_relu"
+    spectral_norm: bool = False
+    positive_output: bool = True
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.hidden_dim, int) or self.hidden_dim < 1:
+            raise ValueError(f"EnergyConfig.hidden_dim must be a positive int, got {self.hidden_dim!r}.")
+        if not isinstance(self.num_hidden_layers, int) or self.num_hidden_layers < 0:
+            raise ValueError(f"EnergyConfig.num_hidden_layers must be an int >= 0, got {self.num_hidden_layers!r}.")
+        make_activation(self.activation)
+
+
+class _Abs(nn.Module):
+    """Parametrization that exposes ``abs(raw_weight)`` as the layer's weight."""
+
+    def forward(self, weight: Tensor) -> Tensor:
+        return weight.abs()
+
+
+class EnergyModel(nn.Module):
+    """
+    MLP energy over a transition: ``E(s, s') = f(concat(s, s'))``, one scalar per transition.
+
+    The input is the concatenation of the two states, not their difference (as the original). Dims listed in
+    ``masked_dims`` are zeroed in both states before the network; the original did this for the arm's target
+    position "for stability", so the energy models dynamics and never sees the goal.
+
+    :param state_dim: D, size of one state.
+    :param config: architecture; ``EnergyConfig()`` (the paper's 3 x 128 LeakyReLU network) when None.
+    :param masked_dims: state dims to zero before the network (negative indices count from the end).
+    """
+
+    def __init__(self, state_dim: int, config: EnergyConfig | None = None, masked_dims: Sequence[int] = ()) -> None:
+        super().__init__()
+        if not isinstance(state_dim, int) or isinstance(state_dim, bool) or state_dim < 1:
+            raise ValueError(f"EnergyModel: state_dim must be a positive int, got {state_dim!r}.")
+        self.state_dim = state_dim
+        self.config = config if config is not None else EnergyConfig()
+        self.masked_dims = normalise_dims(masked_dims, state_dim, "masked_dims")
+
+        cfg = self.config
+        self.net = build_mlp(
+            2 * state_dim,
+            1,
+            hidden_dim=cfg.hidden_dim,
+            num_hidden_layers=cfg.num_hidden_layers,
+            activation=cfg.activation,
+            spectral_norm=cfg.spectral_norm,
+            out_bias=not cfg.positive_output,
+            # The original's final version normalised only the hidden layers once the output became abs().
+            spectral_norm_output=not cfg.positive_output,
+        )
+        if cfg.positive_output:
+            parametrize.register_parametrization(self.output_layer, "weight", _Abs())
+
+        keep = torch.ones(2 * state_dim)
+        for dim in self.masked_dims:
+            keep[dim] = 0.0
+            keep[state_dim + dim] = 0.0
+        # [2D] multiplicative mask over concat(s, s'); not persistent: it follows from the constructor arguments.
+        self.register_buffer("input_mask", keep, persistent=False)
+
+    @property
+    def output_layer(self) -> nn.Linear:
+        """The final ``nn.Linear`` (its ``weight`` is already ``abs()``-ed when ``positive_output``)."""
+        layer = self.net[-1]
+        assert isinstance(layer, nn.Linear)
+        return layer
+
+    def forward(self, states: Tensor, next_states: Tensor) -> Tensor:
+        """
+        Energy of each transition, in one batched call whatever the leading dims.
+
+        :param states: [..., D] states s_t (e.g. [N, K, T, D] envs x candidates x horizon x state).
+        :param next_states: [..., D] next states s_{t+1}, same shape.
+        :return: [...] energies (float, same leading dims).
+        :raises TypeError: for non-tensor or non-floating inputs.
+        :raises ValueError: for mismatched shapes or a last dim other than ``state_dim``.
+        """
+        for name, value in (("states", states), ("next_states", next_states)):
+            if not isinstance(value, Tensor):
+                raise TypeError(f"EnergyModel: {name} must be a torch.Tensor, got {type(value).__name__}.")
+            if not value.is_floating_point():
+                raise TypeError(f"EnergyModel: {name} must be a floating tensor, got dtype {value.dtype}.")
+        if states.shape != next_states.shape:
+            raise ValueError(
+                f"EnergyModel: states and next_states must have the same shape, got {tuple(states.shape)} "
+                f"and {tuple(next_states.shape)}."
+            )
+        if states.ndim == 0 or states.shape[-1] != self.state_dim:
+            raise ValueError(f"EnergyModel: expected states of shape [..., {self.state_dim}], got {tuple(states.shape)}.")
+        leading = states.shape[:-1]
+        pairs = torch.cat([states, next_states], dim=-1).reshape(-1, 2 * self.state_dim)  # [M, 2D]
+        mask: Tensor = self.input_mask  # type: ignore[assignment]
+        if pairs.dtype != mask.dtype:
+            pairs = pairs.to(mask.dtype)
+        if self.masked_dims:
+            pairs = pairs * mask
+        return self.net(pairs).reshape(leading)  # [M, 1] -> [...]
+
+    def extra_repr(self) -> str:
+        return f"state_dim={self.state_dim}, masked_dims={self.masked_dims}"

@@ -1,0 +1,100 @@
+"""Training objectives for the energy model: contrastive divergence (the paper's) and InfoNCE (IBC-style option)."""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+__all__ = ["contrastive_divergence_loss", "info_nce_loss"]
+
+
+def contrastive_divergence_loss(
+    energy_pos: Tensor,
+    energy_neg: Tensor,
+    l2_coeff: float = 1.0,
+    ml_coeff: float = 1.0,
+) -> tuple[Tensor, dict[str, float]]:
+    """
+    The paper's Algorithm-1 objective (``objective='cd'`` in the original, ``train.py:1780-1797``).
+
+    ``L = ml_coeff * (mean E(x+) - mean E(x-)) + l2_coeff * (mean E(x+)^2 + mean E(x-)^2)``
+
+    The first term pushes the energy of real transitions down and that of planned (imagined) ones up; the second
+    keeps energies near zero so the first cannot diverge. Positives and negatives may differ in number (means).
+
+    What is stop-gradiented is the negative *samples* x-, not their energy: the caller must compute
+    ``energy_neg = model(x_neg.detach(), x_neg_next.detach())`` so that no gradient flows back into the planner,
+    while ``energy_neg`` keeps its gradient with respect to the model's parameters (without it the first term
+    could not raise E(x-)). This function therefore does not detach anything.
+
+    :param energy_pos: energies of real transitions, any shape (e.g. [P]).
+    :param energy_neg: energies of planned transitions, any shape (e.g. [N]).
+    :param l2_coeff: weight of the energy-magnitude regulariser (1.0 in the original).
+    :param ml_coeff: weight of the contrastive term (1.0 in the original).
+    :return: the scalar loss and floats ``{"energy_pos", "energy_neg", "loss", "loss_ml", "loss_l2"}`` for logging.
+    :raises ValueError: for an empty batch.
+    """
+    _check_nonempty(energy_pos, "energy_pos")
+    _check_nonempty(energy_neg, "energy_neg")
+    mean_pos = energy_pos.mean()
+    mean_neg = energy_neg.mean()
+    loss_ml = mean_pos - mean_neg
+    loss_l2 = energy_pos.square().mean() + energy_neg.square().mean()
+    loss = ml_coeff * loss_ml + l2_coeff * loss_l2
+    stats = {
+        "energy_pos": float(mean_pos.detach()),
+        "energy_neg": float(mean_neg.detach()),
+        "loss": float(loss.detach()),
+        "loss_ml": float(loss_ml.detach()),
+        "loss_l2": float(loss_l2.detach()),
+    }
+    return loss, stats
+
+
+def info_nce_loss(energy_pos: Tensor, energy_neg: Tensor, temperature: float = 1.0) -> tuple[Tensor, dict[str, float]]:
+    """
+    InfoNCE over energies (as in Implicit BC): cross-entropy of ``softmax(-E / temperature)`` picking the positive.
+
+    An improvement over the paper, off by default. Each positive competes with its own M negatives
+    (``energy_neg`` of shape [B, M]) or with M negatives shared by the whole batch (shape [M]).
+
+    :param energy_pos: [B] energies of real transitions.
+    :param energy_neg: [B, M] per-positive negatives, or [M] shared negatives.
+    :param temperature: softmax temperature (> 0).
+    :return: the scalar loss and floats ``{"energy_pos", "energy_neg", "loss", "accuracy"}``, where accuracy is the
+        fraction of positives whose energy is below all of their negatives'.
+    :raises ValueError: for bad shapes, an empty batch or a non-positive temperature.
+    """
+    _check_nonempty(energy_pos, "energy_pos")
+    _check_nonempty(energy_neg, "energy_neg")
+    if energy_pos.ndim != 1:
+        raise ValueError(f"info_nce_loss: energy_pos must have shape [B], got {tuple(energy_pos.shape)}.")
+    if temperature <= 0:
+        raise ValueError(f"info_nce_loss: temperature must be > 0, got {temperature}.")
+    batch = energy_pos.shape[0]
+    if energy_neg.ndim == 1:
+        energy_neg = energy_neg.unsqueeze(0).expand(batch, -1)  # [M] -> [B, M] shared negatives
+    elif energy_neg.ndim != 2 or energy_neg.shape[0] != batch:
+        raise ValueError(
+            f"info_nce_loss: energy_neg must have shape [B, M] with B={batch} or [M], got {tuple(energy_neg.shape)}."
+        )
+    energies = torch.cat([energy_pos.unsqueeze(1), energy_neg], dim=1)  # [B, 1 + M], positive in column 0
+    logits = -energies / temperature
+    target = torch.zeros(batch, dtype=torch.long, device=logits.device)
+    loss = F.cross_entropy(logits, target)
+    accuracy = (energy_pos.unsqueeze(1) < energy_neg).all(dim=1).float().mean()
+    stats = {
+        "energy_pos": float(energy_pos.detach().mean()),
+        "energy_neg": float(energy_neg.detach().mean()),
+        "loss": float(loss.detach()),
+        "accuracy": float(accuracy),
+    }
+    return loss, stats
+
+
+def _check_nonempty(energy: Tensor, name: str) -> None:
+    if not isinstance(energy, Tensor):
+        raise TypeError(f"{name} must be a torch.Tensor, got {type(energy).__name__}.")
+    if energy.numel() == 0:
+        raise ValueError(f"{name} is empty; the loss needs at least one transition on each side.")

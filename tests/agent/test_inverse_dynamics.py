@@ -1,0 +1,198 @@
+"""Inverse dynamics: ground-truth pass-through, the learned MLP and recursive least squares."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from ebm_agent.inverse_dynamics import (
+    GroundTruthInverseDynamics,
+    InverseDynamics,
+    MLPInverseDynamics,
+    RLSInverseDynamics,
+    make_inverse_dynamics,
+)
+
+LOW, HIGH = -np.ones(2, dtype=np.float32), np.ones(2, dtype=np.float32)
+
+
+def _particle_batch(rng: np.random.Generator, size: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Particle-like data: s' = clip(s + a / 20) with a ~ U(-1, 1)^2."""
+    states = rng.uniform(-1, 1, (size, 2)).astype(np.float32)
+    actions = rng.uniform(-1, 1, (size, 2)).astype(np.float32)
+    return states, np.clip(states + actions / 20, -1, 1), actions
+
+
+def test_ground_truth_passes_through_and_clips() -> None:
+    model = GroundTruthInverseDynamics(lambda s, s2: 20 * (s2 - s), LOW, HIGH)
+    states = np.zeros((3, 2))
+    next_states = np.array([[0.01, -0.02], [0.2, 0.0], [-0.1, 0.04]])
+    np.testing.assert_allclose(model(states, next_states), [[0.2, -0.4], [1.0, 0.0], [-1.0, 0.8]], rtol=1e-6)
+    assert model.update(states, next_states, np.zeros((3, 2))) == {}
+    assert model.state_dict() == {}
+    assert isinstance(model, InverseDynamics)
+
+
+def test_ground_truth_rejects_unbatched_fn_output() -> None:
+    model = GroundTruthInverseDynamics(lambda s, s2: np.zeros(2), LOW, HIGH)
+    with pytest.raises(ValueError, match="batched"):
+        model(np.zeros((3, 2)), np.zeros((3, 2)))
+
+
+def test_mlp_learns_the_particle_inverse_map() -> None:
+    rng = np.random.default_rng(0)
+    model = MLPInverseDynamics(2, 2, LOW, HIGH, seed=0)
+    assert isinstance(model, InverseDynamics)
+    assert sum(p.numel() for p in model.module.parameters()) == 4 * 32 + 32 + 2 * (32 * 32 + 32) + 32 * 2
+    first = model.update(*_particle_batch(rng, 256))["id_loss"]
+    for _ in range(400):
+        stats = model.update(*_particle_batch(rng, 256))
+    states, next_states, _ = _particle_batch(rng, 2000)
+    predicted = model(states, next_states)
+    expected = np.clip(20 * (next_states - states), -1, 1)  # the exact inverse (clipping at the walls included)
+    mse = float(np.mean((predicted - expected) ** 2))
+    assert mse < 0.01, mse
+    assert stats["id_loss"] < first / 10
+    assert predicted.dtype == np.float32 and np.all(np.abs(predicted) <= 1.0)
+
+
+def test_mlp_clips_outputs_seeds_init_and_round_trips(tmp_path: Path) -> None:
+    rng = np.random.default_rng(1)
+    a = MLPInverseDynamics(2, 2, LOW * 0.1, HIGH * 0.1, seed=3)
+    b = MLPInverseDynamics(2, 2, LOW * 0.1, HIGH * 0.1, seed=3)
+    states, next_states, actions = _particle_batch(rng, 64)
+    np.testing.assert_array_equal(a(states, next_states), b(states, next_states))
+    big = a(states * 50, next_states * 80)  # far outside the data: raw outputs exceed 0.1
+    assert np.all(np.abs(big) <= 0.1 + 1e-7) and np.any(np.isclose(np.abs(big), 0.1))
+    for _ in range(5):
+        a.update(states, next_states, actions)
+    path = tmp_path / "id.pt"
+    torch.save(a.state_dict(), path)
+    c = MLPInverseDynamics(2, 2, LOW * 0.1, HIGH * 0.1, seed=4)
+    c.load_state_dict(torch.load(path))
+    np.testing.assert_array_equal(c(states, next_states), a(states, next_states))
+    # The optimiser state came along: one more identical step stays identical.
+    a.update(states, next_states, actions)
+    c.update(states, next_states, actions)
+    np.testing.assert_allclose(c(states, next_states), a(states, next_states), atol=1e-6)
+
+
+def test_mlp_masked_dims_are_ignored() -> None:
+    model = MLPInverseDynamics(3, 2, LOW, HIGH, seed=0, masked_dims=(-1,))
+    states = np.zeros((4, 3), dtype=np.float32)
+    next_states = np.full((4, 3), 0.02, dtype=np.float32)
+    moved = next_states.copy()
+    moved[:, 2] = 5.0
+    np.testing.assert_array_equal(model(states, next_states), model(states, moved))
+
+
+def _linear_system(seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    state_matrix = np.eye(3) + 0.1 * rng.standard_normal((3, 3))
+    action_matrix = rng.standard_normal((3, 2))
+    offset = 0.05 * rng.standard_normal(3)
+    return state_matrix, action_matrix, offset
+
+
+def _step(system: tuple[np.ndarray, ...], states: np.ndarray, actions: np.ndarray) -> np.ndarray:
+    """s' = A s + B a + c on dims 0..2; dim 3 is a target that never moves."""
+    state_matrix, action_matrix, offset = system
+    next_states = states.copy()
+    next_states[:, :3] = states[:, :3] @ state_matrix.T + actions @ action_matrix.T + offset
+    return next_states
+
+
+def test_rls_recovers_a_linear_systems_actions() -> None:
+    rng = np.random.default_rng(0)
+    system = _linear_system(0)
+    model = RLSInverseDynamics(4, 2, LOW, HIGH, ridge=0.0, state_dims=(0, 1, 2))
+    assert isinstance(model, InverseDynamics)
+    for _ in range(10):
+        states = rng.uniform(-1, 1, (16, 4))
+        actions = rng.uniform(-1, 1, (16, 2))
+        model.update(states, _step(system, states, actions), actions)
+    states = rng.uniform(-1, 1, (100, 4))
+    actions = rng.uniform(-0.9, 0.9, (100, 2))
+    recovered = model(states, _step(system, states, actions))
+    assert np.max(np.abs(recovered - actions)) < 1e-3
+    np.testing.assert_allclose(model.weights[:, 3:5], system[1], atol=1e-4)
+
+
+def test_rls_default_ridge_is_accurate_on_a_strongly_actuated_system() -> None:
+    rng = np.random.default_rng(1)
+    state_matrix, _, offset = _linear_system(1)
+    system = (state_matrix, 60.0 * np.array([[1.0, 0.2], [0.1, 1.0], [0.3, -0.4]]), offset)
+    model = RLSInverseDynamics(4, 2, LOW, HIGH, state_dims=(0, 1, 2))  # ridge 0.3, as the original
+    for _ in range(10):
+        states = rng.uniform(-1, 1, (16, 4))
+        actions = rng.uniform(-1, 1, (16, 2))
+        model.update(states, _step(system, states, actions), actions)
+    states = rng.uniform(-1, 1, (50, 4))
+    actions = rng.uniform(-0.9, 0.9, (50, 2))
+    assert np.max(np.abs(model(states, _step(system, states, actions)) - actions)) < 1e-3
+
+
+def test_rls_ridge_pulls_towards_the_prior_action() -> None:
+    model = RLSInverseDynamics(2, 2, LOW, HIGH, ridge=0.3)  # untrained: W = 0, so the prior decides
+    prior = np.array([[0.5, -0.25]])
+    np.testing.assert_allclose(model(np.zeros((1, 2)), np.ones((1, 2)), prior_actions=prior), prior, atol=1e-6)
+    np.testing.assert_allclose(model(np.zeros((1, 2)), np.ones((1, 2))), np.zeros((1, 2)), atol=1e-6)
+
+
+def test_rls_block_update_equals_sequential_updates_with_forgetting() -> None:
+    rng = np.random.default_rng(2)
+    forgetting, init_cov = 0.9, 10.0
+    model = RLSInverseDynamics(3, 2, LOW, HIGH, forgetting=forgetting, init_cov=init_cov)
+    states, next_states, actions = rng.normal(size=(7, 3)), rng.normal(size=(7, 3)), rng.uniform(-1, 1, (7, 2))
+    model.update(states, next_states, actions)
+    # Textbook per-sample RLS with forgetting.
+    weights, covariance = np.zeros((3, 6)), np.eye(6) * init_cov
+    for s, s_next, a in zip(states, next_states, actions):
+        x = np.concatenate([s, a, [1.0]]).astype(np.float32).astype(np.float64)
+        y = s_next.astype(np.float32).astype(np.float64)
+        gain = covariance @ x / (forgetting + x @ covariance @ x)
+        weights += np.outer(y - weights @ x, gain)
+        covariance = (covariance - np.outer(gain, x @ covariance)) / forgetting
+    np.testing.assert_allclose(model.weights, weights, rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(model.covariance, covariance, rtol=1e-8, atol=1e-8)
+
+
+def test_rls_state_dict_round_trip_and_clipping() -> None:
+    rng = np.random.default_rng(3)
+    system = _linear_system(3)
+    model = RLSInverseDynamics(4, 2, LOW * 0.5, HIGH * 0.5, ridge=0.0, state_dims=(0, 1, 2))
+    states = rng.uniform(-1, 1, (32, 4))
+    actions = rng.uniform(-0.5, 0.5, (32, 2))
+    model.update(states, _step(system, states, actions), actions)
+    twin = RLSInverseDynamics(4, 2, LOW * 0.5, HIGH * 0.5, ridge=0.0, state_dims=(0, 1, 2))
+    twin.load_state_dict(model.state_dict())
+    far = _step(system, states, rng.uniform(-3, 3, (32, 2)))
+    np.testing.assert_array_equal(twin(states, far), model(states, far))
+    assert np.all(np.abs(model(states, far)) <= 0.5)
+
+
+@pytest.mark.parametrize("kind", ["ground_truth", "mlp", "rls"])
+def test_make_inverse_dynamics(kind: str) -> None:
+    model = make_inverse_dynamics(kind, LOW, HIGH, state_dim=2, fn=lambda s, s2: 20 * (s2 - s))
+    assert isinstance(model, InverseDynamics)
+    assert model(np.zeros((5, 2)), np.zeros((5, 2))).shape == (5, 2)
+
+
+def test_make_inverse_dynamics_errors() -> None:
+    with pytest.raises(ValueError, match="ground_truth"):
+        make_inverse_dynamics("oracle", LOW, HIGH, state_dim=2)
+    with pytest.raises(ValueError, match="needs fn"):
+        make_inverse_dynamics("ground_truth", LOW, HIGH)
+    with pytest.raises(ValueError, match="state_dim"):
+        make_inverse_dynamics("mlp", LOW, HIGH)
+    with pytest.raises(ValueError, match="shape"):
+        MLPInverseDynamics(2, 3, LOW, HIGH)
+    with pytest.raises(ValueError, match=r"\[B, 2\]"):
+        MLPInverseDynamics(2, 2, LOW, HIGH)(np.zeros((4, 3)), np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="state_dims entry 4 is out of range"):
+        RLSInverseDynamics(4, 2, LOW, HIGH, state_dims=(0, 4))
+    with pytest.raises(ValueError, match="forgetting"):
+        RLSInverseDynamics(4, 2, LOW, HIGH, forgetting=0.0)
