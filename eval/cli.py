@@ -1,0 +1,395 @@
+"""``ebm-eval``: train the EBM agent and its baselines under equal budgets and report the comparison.
+
+    ebm-eval --baseline ppo                       # EBM vs PPO on the particle env, small budget
+    ebm-eval --config particle_online --jobs 2    # a bundled preset, two runs at a time
+    ebm-eval --env maze --baseline ppo --baseline action-ff --seeds 0 1 2 --timesteps 50000
+
+Settings come from three layers, the later winning: built-in defaults, the ``--config`` preset, explicit flags.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import yaml
+
+from envs import ENV_IDS, resolve_env_id
+from eval.executors import executor_from_name
+from eval.jobs import Job, library_versions, to_plain
+from eval.presets import load_preset
+from eval.registry import AGENTS
+
+DEFAULTS: dict[str, Any] = {
+    "env": ["particle"],
+    "baseline": ["ppo"],
+    "timesteps": 5000,
+    "seeds": [0],
+    "eval_episodes": 10,
+    "eval_freq": None,  # timesteps // 5
+    "env_kwargs": {},
+    "eval_env_kwargs": {},
+    "hyperparams": {},
+    "device": "auto",
+    "jobs": 1,
+    "executor": "local",
+    "out": None,  # runs/ebm-eval-<timestamp>
+}
+"""Built-in defaults: ``ebm-eval`` alone runs EBM vs PPO on the particle env within minutes on 2 CPU cores."""
+
+SUBJECT = "ebm"
+"""The agent under test: always run, unless ``--agents`` lists the agents explicitly."""
+
+
+def positive_int(text: str) -> int:
+    """Argparse type: an integer >= 1.
+
+    :param text: the flag's value.
+    :return: the integer.
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be a positive integer (at least 1), got {value}")
+    return value
+
+
+def seed_int(text: str) -> int:
+    """Argparse type: an integer >= 0.
+
+    :param text: the flag's value.
+    :return: the integer.
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds are non-negative integers, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"seeds are non-negative integers, got {value}")
+    return value
+
+
+def parse_value(text: str) -> Any:
+    """A ``key=value`` value read as YAML (``[0, 0]``, ``true``, ``64``), with ``1e-3`` read as a float.
+
+    :param text: the value text.
+    :return: the Python value.
+    """
+    value = yaml.safe_load(text)
+    if isinstance(value, str):
+        try:
+            return float(value)  # YAML 1.1 reads 1e-3 as a string; rl-zoo3 users expect a number
+        except ValueError:
+            return value
+    return value
+
+
+def key_value(text: str) -> tuple[str, Any]:
+    """Argparse type: ``key=value``.
+
+    :param text: the flag's item.
+    :return: (key, parsed value).
+    """
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected key=value, got {text!r} (e.g. goal=[0.5,0.5] or ppo:n_steps=256)")
+    try:
+        return key.strip(), parse_value(value)
+    except yaml.YAMLError as error:
+        raise argparse.ArgumentTypeError(f"cannot read the value of {key!r}: {error}") from None
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``ebm-eval`` argument parser (flags in rl-zoo3's style).
+
+    :return: the parser.
+    """
+
+    baselines = [name for name in AGENTS if name != SUBJECT]
+    parser = argparse.ArgumentParser(
+        prog="ebm-eval",
+        description="Train the EBM planning agent and baselines on exactly the same number of transitions, "
+        "evaluate them the paper's way and write a comparison table, learning curves and TensorBoard logs.",
+        epilog="Examples: `ebm-eval --baseline ppo`; `ebm-eval --config particle_online --jobs 2`; "
+        "`ebm-eval --env maze --baseline ppo --baseline action-ff --seeds 0 1 2`.",
+    )
+    parser.add_argument(
+        "--env",
+        nargs="+",
+        action="extend",
+        metavar="ENV",
+        help=f"env(s): a short name ({', '.join(ENV_IDS)}) or any registered Gymnasium id (default: particle)",
+    )
+    parser.add_argument(
+        "--baseline",
+        nargs="+",
+        action="extend",
+        choices=baselines,
+        metavar="NAME",
+        help=f"baseline(s) run beside the EBM agent: {', '.join(baselines)}; repeat the flag for several (default: ppo)",
+    )
+    parser.add_argument(
+        "--agents",
+        nargs="+",
+        action="extend",
+        choices=list(AGENTS),
+        metavar="NAME",
+        help=f"the full list of agents, replacing EBM + baselines: {', '.join(AGENTS)}",
+    )
+    parser.add_argument(
+        "-n",
+        "--timesteps",
+        type=positive_int,
+        help=f"budget: transitions every agent learns from, exactly (default: {DEFAULTS['timesteps']})",
+    )
+    parser.add_argument("--seeds", nargs="+", type=seed_int, metavar="SEED", help="training seeds, one run each (default: 0)")
+    parser.add_argument(
+        "--eval-episodes",
+        type=positive_int,
+        help=f"deterministic episodes per evaluation (default: {DEFAULTS['eval_episodes']})",
+    )
+    parser.add_argument(
+        "--eval-freq", type=positive_int, help="evaluate every this many transitions (default: timesteps // 5)"
+    )
+    parser.add_argument("-f", "--out", help="output folder (default: runs/ebm-eval-<timestamp>)")
+    parser.add_argument("--device", help="torch device of the agents: auto, cpu, cuda, cuda:1 (default: auto)")
+    parser.add_argument(
+        "-c", "--config", help="preset: a bundled name (see eval/presets/) or a YAML file; explicit flags win over it"
+    )
+    parser.add_argument("-j", "--jobs", type=positive_int, help="runs executed at once, one process each (default: 1)")
+    parser.add_argument("--executor", help="where runs execute: local (process pool; default) or ray (needs the ray extra)")
+    parser.add_argument(
+        "--env-kwargs",
+        nargs="+",
+        action="extend",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="gym.make keyword arguments, values in YAML (e.g. goal=[0.5,0.5])",
+    )
+    parser.add_argument(
+        "--eval-env-kwargs",
+        nargs="+",
+        action="extend",
+        type=key_value,
+        metavar="KEY=VALUE",
+        help="changes to --env-kwargs for the evaluation env only (e.g. start=[0,0]: train from random starts, "
+        "evaluate from the paper's start)",
+    )
+    parser.add_argument(
+        "-params",
+        "--hyperparams",
+        nargs="+",
+        action="extend",
+        type=key_value,
+        metavar="[AGENT:]KEY=VALUE",
+        help="agent keyword arguments, values in YAML; a plain key goes to the EBM agent, AGENT:KEY to that agent "
+        "(e.g. horizon=20 ppo:n_steps=256)",
+    )
+    parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
+    parser.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity of the agents: 0, 1 or 2 (default: 0)")
+    return parser
+
+
+def _hyperparams_by_agent(pairs: Sequence[tuple[str, Any]], known: Sequence[str]) -> dict[str, dict[str, Any]]:
+    """``[("horizon", 20), ("ppo:n_steps", 256)]`` -> ``{"ebm": {"horizon": 20}, "ppo": {"n_steps": 256}}``."""
+    grouped: dict[str, dict[str, Any]] = {}
+    for key, value in pairs:
+        agent, sep, name = key.rpartition(":")
+        agent = agent if sep else SUBJECT
+        if agent not in known:
+            raise ValueError(f"--hyperparams {key}: unknown agent {agent!r}; prefix a key with one of {', '.join(known)}")
+        grouped.setdefault(agent, {})[name] = value
+    return grouped
+
+
+def resolve_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Merge defaults, the preset and explicit flags, and check the result.
+
+    :param args: parsed flags (unset ones are None).
+    :return: the settings of the sweep (env ids resolved, agents listed, eval_freq filled in).
+    """
+    preset = load_preset(args.config) if args.config else {}
+    settings: dict[str, Any] = {}
+    for key, default in DEFAULTS.items():
+        explicit = getattr(args, key, None)
+        settings[key] = explicit if explicit is not None else preset.get(key, default)
+    for key in ("env", "baseline", "seeds"):
+        if not isinstance(settings[key], list):
+            settings[key] = [settings[key]]
+    settings["agents"] = _agents(args, preset, settings.pop("baseline"))
+    settings["env_ids"] = [resolve_env(name) for name in settings["env"]]
+    settings["hyperparams"] = _hyperparams(args, preset)
+    settings["env_kwargs"] = {**(preset.get("env_kwargs") or {}), **dict(args.env_kwargs or [])}
+    # The evaluation env starts from the training env's kwargs; --eval-env-kwargs changes some of them.
+    settings["eval_env_kwargs"] = {
+        **settings["env_kwargs"],
+        **(preset.get("eval_env_kwargs") or {}),
+        **dict(args.eval_env_kwargs or []),
+    }
+    if settings["eval_freq"] is None and _is_positive_int(settings["timesteps"]):
+        settings["eval_freq"] = max(settings["timesteps"] // 5, 1)
+    for key in ("timesteps", "eval_episodes", "eval_freq", "jobs"):
+        if not _is_positive_int(settings[key]):
+            raise ValueError(f"{key} must be a positive integer, got {settings[key]!r}")
+    if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in settings["seeds"]):
+        raise ValueError(f"seeds must be non-negative integers, got {settings['seeds']!r}")
+    if settings["out"] is None:
+        settings["out"] = str(Path("runs") / time.strftime("ebm-eval-%Y%m%d-%H%M%S"))
+    return settings
+
+
+def _is_positive_int(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 1
+
+
+def _agents(args: argparse.Namespace, preset: dict[str, Any], baselines: list[str]) -> list[str]:
+    """--agents > --baseline > preset agents > preset baseline > default; EBM always leads unless --agents."""
+    if args.agents:
+        agents = list(args.agents)
+    elif args.baseline is None and "agents" in preset:
+        agents = list(preset["agents"]) if isinstance(preset["agents"], list) else [preset["agents"]]
+    else:
+        agents = [SUBJECT, *baselines]
+    unknown = [name for name in agents if name not in AGENTS]
+    if unknown:
+        raise ValueError(f"unknown agent(s) {unknown}; choose from {', '.join(AGENTS)}")
+    return list(dict.fromkeys(agents))
+
+
+def _hyperparams(args: argparse.Namespace, preset: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """The preset's per-agent hyperparameters, updated key by key by ``--hyperparams``."""
+    hyperparams: dict[str, dict[str, Any]] = {}
+    for agent, values in (preset.get("hyperparams") or {}).items():
+        if agent not in AGENTS or not isinstance(values, dict):
+            raise ValueError(
+                f"preset hyperparams must map agent names ({', '.join(AGENTS)}) to keyword arguments, "
+                f"got {agent!r}: {values!r}"
+            )
+        hyperparams[agent] = dict(values)
+    for agent, values in _hyperparams_by_agent(args.hyperparams or [], list(AGENTS)).items():
+        hyperparams.setdefault(agent, {}).update(values)
+    return hyperparams
+
+
+def resolve_env(name: str) -> str:
+    """A short name or a registered id (optionally ``module:id``) -> the registered id.
+
+    :param name: the ``--env`` value.
+    :return: the Gymnasium id.
+    """
+    env_id = resolve_env_id(name)
+    module, sep, bare_id = env_id.rpartition(":")
+    if sep:
+        try:
+            importlib.import_module(module)
+        except ImportError as error:
+            raise ValueError(f"--env {name}: cannot import {module!r} to register the env ({error})") from None
+        env_id = bare_id
+    if env_id not in gym.registry:
+        raise ValueError(
+            f"unknown env {name!r}: use a short name ({', '.join(ENV_IDS)}) or a registered Gymnasium id "
+            "(e.g. Pendulum-v1, or module:EnvId to import the module that registers it)"
+        )
+    return env_id
+
+
+def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0) -> list[Job]:
+    """One job per env, agent and seed.
+
+    :param settings: from ``resolve_settings``.
+    :param progress: show SB3's progress bar inside runs (only when they run in this process).
+    :param verbose: SB3 verbosity.
+    :return: the jobs, env-major then agent then seed.
+    """
+    return [
+        Job(
+            env_id=env_id,
+            agent=agent,
+            seed=seed,
+            timesteps=settings["timesteps"],
+            eval_freq=settings["eval_freq"],
+            eval_episodes=settings["eval_episodes"],
+            hyperparams=dict(settings["hyperparams"].get(agent, {})),
+            env_kwargs=dict(settings["env_kwargs"]),
+            eval_env_kwargs=dict(settings["eval_env_kwargs"]),
+            device=settings["device"],
+            out_dir=settings["out"],
+            verbose=verbose,
+            progress_bar=progress and settings["jobs"] == 1,
+        )
+        for env_id in settings["env_ids"]
+        for agent in settings["agents"]
+        for seed in settings["seeds"]
+    ]
+
+
+def _anchors_for(jobs: Sequence[Job], env_kwargs: dict[str, Any]) -> dict[str, Any]:
+    from eval.anchors import compute_anchors
+
+    anchors: dict[str, Any] = {}
+    for job in jobs:
+        if job.env_short in anchors:
+            continue
+        try:
+            anchors[job.env_short] = compute_anchors(job.env_id, env_kwargs)
+        except Exception as error:  # the anchors are context; their failure must not cost the sweep
+            print(f"ebm-eval: no anchors for {job.env_id}: {error}", file=sys.stderr)
+            anchors[job.env_short] = None
+    return anchors
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``ebm-eval``.
+
+    :param argv: the arguments (default: ``sys.argv[1:]``).
+    :return: 0 when every run finished, 1 when some failed (their error is in the report); bad flags exit 2.
+    """
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        settings = resolve_settings(args)
+        executor = executor_from_name(settings["executor"], jobs=settings["jobs"])
+    except (ValueError, TypeError) as error:
+        parser.error(str(error))  # exits 2, like any bad flag
+
+    from eval.plots import plot_learning_curves  # matplotlib and scipy load only for a real sweep
+    from eval.report import write_csv, write_markdown
+
+    progress = not args.no_progress
+    out = Path(settings["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    command = ["ebm-eval", *(sys.argv[1:] if argv is None else argv)]
+    (out / "config.yaml").write_text(
+        yaml.safe_dump(to_plain({**settings, "command": command, "versions": library_versions()}), sort_keys=False)
+    )
+    jobs = build_jobs(settings, progress=progress, verbose=args.verbose)
+    print(
+        f"ebm-eval: {len(jobs)} run(s) = {len(settings['env_ids'])} env(s) x agents {settings['agents']} x seeds "
+        f"{settings['seeds']}, {settings['timesteps']} transitions each, into {out}/",
+        file=sys.stderr,
+    )
+    anchors = _anchors_for(jobs, settings["eval_env_kwargs"])  # anchors of the env the scores come from
+    (out / "anchors.json").write_text(json.dumps({env: a and asdict(a) for env, a in anchors.items()}, indent=2))
+
+    results = executor.map(jobs, progress=progress)
+
+    write_csv(results, out / "results.csv")
+    text = write_markdown(results, out / "results.md", anchors, command)
+    plot_learning_curves(results, out, anchors)
+    print(text)
+    print(f"Results in {out}/ (results.md, results.csv, learning_curves_*.png); curves: tensorboard --logdir {out}")
+    return 0 if all(result.ok for result in results) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

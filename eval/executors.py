@@ -1,0 +1,132 @@
+"""Executors run a list of independent jobs and return their results in the same order.
+
+``LocalExecutor`` uses a process pool on this machine. A distributed engine plugs in behind the same
+``Executor`` protocol (``executor_from_name("ray")`` imports ``eval.ray_executor`` lazily, a later module):
+it only has to ship a picklable ``Job`` to ``run_job`` and bring the picklable ``JobResult`` back.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import traceback
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor, as_completed
+from typing import Any, Protocol, runtime_checkable
+
+from tqdm.auto import tqdm
+
+from eval.jobs import Job, JobResult, run_job
+
+Runner = Callable[[Job], JobResult]
+
+
+@runtime_checkable
+class Executor(Protocol):
+    """Runs jobs and returns one result per job, in the order of the jobs."""
+
+    def map(self, jobs: Sequence[Job], progress: bool = True) -> list[JobResult]:
+        """Run every job.
+
+        :param jobs: the jobs, independent of each other.
+        :param progress: show a progress bar over jobs.
+        :return: the results, ``results[i]`` for ``jobs[i]``; a job that failed gives a failed result.
+        """
+        ...
+
+
+def _limit_threads(threads: int) -> None:
+    """Pool initializer: one torch thread per worker, so that ``--jobs`` workers do not fight over the cores."""
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+class LocalExecutor:
+    """Runs jobs on this machine: in this process for ``jobs=1``, else in a pool of spawned processes.
+
+    :param jobs: number of jobs run at once (worker processes).
+    :param runner: the function run per job; it must be importable by name (picklable) for ``jobs > 1``.
+    :param threads_per_job: torch threads of each worker process (ignored in-process).
+    """
+
+    def __init__(self, jobs: int = 1, runner: Runner = run_job, threads_per_job: int = 1) -> None:
+        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
+            raise ValueError(f"jobs must be a positive integer (parallel worker processes), got {jobs!r}")
+        self.jobs = jobs
+        self.runner = runner
+        self.threads_per_job = threads_per_job
+
+    def map(self, jobs: Sequence[Job], progress: bool = True) -> list[JobResult]:
+        """Run every job; see ``Executor.map``.
+
+        :param jobs: the jobs.
+        :param progress: show a progress bar over jobs.
+        :return: one result per job, in order.
+        """
+        jobs = list(jobs)
+        if not jobs:
+            return []
+        with tqdm(total=len(jobs), desc="ebm-eval jobs", unit="job", disable=not progress) as bar:
+            if self.jobs == 1:
+                return [self._run_in_process(job, bar) for job in jobs]
+            return self._run_in_pool(jobs, bar)
+
+    def _run_in_process(self, job: Job, bar: Any) -> JobResult:
+        bar.set_postfix_str(_describe(job))
+        try:
+            result = self.runner(job)
+        except Exception:  # a runner other than run_job may raise; the sweep goes on
+            result = JobResult(job=job, status="failed", error=traceback.format_exc())
+        bar.update(1)
+        return result
+
+    def _run_in_pool(self, jobs: list[Job], bar: Any) -> list[JobResult]:
+        # spawn, not fork: torch and MuJoCo state must not be copied into children mid-flight.
+        context = multiprocessing.get_context("spawn")
+        results: list[JobResult | None] = [None] * len(jobs)
+        workers = min(self.jobs, len(jobs))
+        with ProcessPoolExecutor(
+            workers, mp_context=context, initializer=_limit_threads, initargs=(self.threads_per_job,)
+        ) as pool:
+            futures: dict[Future[JobResult], int] = {pool.submit(self.runner, job): i for i, job in enumerate(jobs)}
+            for future in as_completed(futures):
+                index = futures[future]
+                try:
+                    results[index] = future.result()
+                except Exception:  # the worker died or the job could not be pickled
+                    results[index] = JobResult(job=jobs[index], status="failed", error=traceback.format_exc())
+                bar.set_postfix_str(_describe(jobs[index]))
+                bar.update(1)
+        return [result for result in results if result is not None]
+
+
+def _describe(job: Job) -> str:
+    return f"{job.env_short}/{job.agent}/seed {job.seed}"
+
+
+EXECUTORS = ("local", "ray")
+"""Executor names understood by ``executor_from_name``."""
+
+
+def executor_from_name(name: str, **kwargs: Any) -> Executor:
+    """Build an executor by name.
+
+    :param name: "local" (process pool on this machine) or "ray" (needs the ``ray`` extra and ``eval.ray_executor``).
+    :param kwargs: constructor arguments of the executor (e.g. ``jobs=4``).
+    :return: the executor.
+    """
+    if name == "local":
+        return LocalExecutor(**kwargs)
+    if name == "ray":
+        try:
+            from eval.ray_executor import RayExecutor  # type: ignore[import-not-found]
+        except ImportError as error:
+            raise ValueError(
+                f"the ray executor is not available ({error}); install the extra with `pip install ebm-agent[ray]` "
+                "or use --executor local"
+            ) from None
+        return RayExecutor(**kwargs)  # type: ignore[no-any-return]
+    raise ValueError(f"unknown executor {name!r}; choose one of: {', '.join(EXECUTORS)}")
+
+
+__all__ = ["EXECUTORS", "Executor", "LocalExecutor", "executor_from_name"]

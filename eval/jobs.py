@@ -1,0 +1,304 @@
+"""One training run of the comparison (env, agent, seed, budget) as a picklable job, and the function that runs it.
+
+``run_job`` is a pure function of its ``Job``: it is what a process-pool worker (``LocalExecutor``) or a
+distributed task (a Ray executor) runs, and its ``JobResult`` carries only plain Python values back.
+
+Run folder ``<out>/<env_short>/<agent>/seed_<k>/``:
+
+- ``config.yaml``: the job and the library versions;
+- ``evaluations.npz``: SB3's ``EvalCallback`` file (``timesteps``, ``results``, ``ep_lengths``[, ``successes``]),
+  with the final evaluation appended when the callback's last one was earlier;
+- ``metrics.json``: the final deterministic evaluation, the transitions really consumed, wall times;
+- ``model.zip``: the trained model; ``error.txt`` instead when the job failed.
+
+TensorBoard events go to ``<out>/tb/<env_short>/<agent>_s<seed>_1/`` so that ``tensorboard --logdir <out>``
+shows every agent and seed of an env side by side.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import time
+import traceback
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+EVAL_SEED_OFFSET = 10_000
+"""The evaluation env is seeded ``seed + EVAL_SEED_OFFSET`` so that it never replays the training env's episodes."""
+
+
+@dataclass(frozen=True)
+class Job:
+    """Everything one training run needs; picklable.
+
+    :param env_id: registered Gymnasium id (short names are resolved by the CLI).
+    :param agent: a key of ``eval.registry.AGENTS``.
+    :param seed: seed of the agent and of its training env.
+    :param timesteps: budget: transitions the agent may learn from.
+    :param eval_freq: evaluate every ``eval_freq`` transitions (converted to per-env calls for ``EvalCallback``).
+    :param eval_episodes: deterministic episodes per evaluation.
+    :param hyperparams: keyword arguments of the agent.
+    :param env_kwargs: keyword arguments of ``gym.make`` for the training env.
+    :param eval_env_kwargs: keyword arguments of the evaluation env (None: ``env_kwargs``), e.g. the paper's fixed
+        evaluation start for an agent trained from random starts.
+    :param device: torch device.
+    :param out_dir: root folder of the sweep.
+    :param verbose: SB3 verbosity of the agent.
+    :param progress_bar: show SB3's progress bar during ``learn`` (for in-process runs).
+    """
+
+    env_id: str
+    agent: str
+    seed: int
+    timesteps: int
+    eval_freq: int
+    eval_episodes: int
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    eval_env_kwargs: dict[str, Any] | None = None
+    device: str = "auto"
+    out_dir: str = "runs"
+    verbose: int = 0
+    progress_bar: bool = False
+
+    @property
+    def env_short(self) -> str:
+        """The env's short name (``particle``) or its id made safe for a folder name."""
+        return env_short_name(self.env_id)
+
+    @property
+    def run_dir(self) -> Path:
+        """``<out>/<env_short>/<agent>/seed_<k>``."""
+        return Path(self.out_dir) / self.env_short / self.agent / f"seed_{self.seed}"
+
+    @property
+    def tensorboard_log(self) -> Path:
+        """``<out>/tb/<env_short>``: one TensorBoard folder per env, one subfolder per agent and seed."""
+        return Path(self.out_dir) / "tb" / self.env_short
+
+    @property
+    def tb_log_name(self) -> str:
+        """``<agent>_s<seed>``; SB3 appends ``_1`` to name the run folder."""
+        return f"{self.agent}_s{self.seed}"
+
+
+@dataclass(frozen=True)
+class JobResult:
+    """What a job produced; plain Python values only, so it pickles across processes.
+
+    :param job: the job.
+    :param status: "ok" or "failed".
+    :param timesteps: transitions the agent really consumed (``model.num_timesteps``).
+    :param score_mean: mean final evaluation score.
+    :param score_std: population std of the final evaluation scores over episodes.
+    :param episode_scores: each final evaluation episode's score.
+    :param episode_lengths: each final evaluation episode's length.
+    :param success_rate: fraction of successful final evaluation episodes, None if the env does not say.
+    :param wall_time_s: wall time of the whole job.
+    :param error: the traceback when the job failed.
+    """
+
+    job: Job
+    status: str
+    timesteps: int = 0
+    score_mean: float = float("nan")
+    score_std: float = float("nan")
+    episode_scores: tuple[float, ...] = ()
+    episode_lengths: tuple[int, ...] = ()
+    success_rate: float | None = None
+    wall_time_s: float = 0.0
+    error: str | None = None
+
+    @property
+    def ok(self) -> bool:
+        """True when the job finished."""
+        return self.status == "ok"
+
+    @property
+    def run_dir(self) -> Path:
+        """The job's run folder."""
+        return self.job.run_dir
+
+
+def env_short_name(env_id: str) -> str:
+    """The CLI short name of a registered id (``ebm/Particle-v0`` -> ``particle``), else a folder-safe id.
+
+    :param env_id: Gymnasium id, optionally ``module:id``.
+    :return: a name without path separators.
+    """
+    from envs import ENV_IDS
+
+    for short, registered in ENV_IDS.items():
+        if env_id in (registered, f"envs:{registered}"):
+            return short
+    return env_id.replace("/", "_").replace(":", "_")
+
+
+def to_plain(value: Any) -> Any:
+    """Turn tuples, numpy scalars and arrays into lists and Python numbers, so YAML and JSON accept them.
+
+    :param value: a nested structure of dicts, sequences and scalars.
+    :return: the same structure built from dict, list, str, int, float, bool and None only.
+    """
+    return json.loads(json.dumps(value, default=lambda obj: obj.tolist() if hasattr(obj, "tolist") else str(obj)))
+
+
+def library_versions() -> dict[str, str]:
+    """Versions that decide a run's numbers, for ``config.yaml`` and ``metrics.json``.
+
+    :return: package name -> version.
+    """
+    from importlib import metadata
+
+    versions = {"python": platform.python_version()}
+    for package in ("ebm-agent", "torch", "numpy", "gymnasium", "stable-baselines3", "mujoco"):
+        try:
+            versions[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            versions[package] = "not installed"
+    return versions
+
+
+def run_job(job: Job) -> JobResult:
+    """Train one agent on one env for exactly its budget, evaluate it, and write its run folder.
+
+    Never raises for a failure inside the run: the error comes back as a failed ``JobResult`` (and in
+    ``error.txt``) so that a sweep keeps its other runs.
+
+    :param job: the run.
+    :return: the result.
+    """
+    start = time.perf_counter()
+    run_dir = job.run_dir
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        config = {**to_plain(asdict(job)), "versions": library_versions()}
+        (run_dir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
+        return _train_and_evaluate(job, start)
+    except Exception:  # a failed run must not end the sweep
+        error = traceback.format_exc()
+        try:
+            (run_dir / "error.txt").write_text(error)
+        except OSError:
+            pass
+        return JobResult(job=job, status="failed", wall_time_s=time.perf_counter() - start, error=error)
+
+
+def _train_and_evaluate(job: Job, start: float) -> JobResult:
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.env_util import make_vec_env
+
+    import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
+    from eval.evaluation import append_evaluation, evaluate_episodes, last_evaluation
+    from eval.registry import get_agent
+
+    spec = get_agent(job.agent)
+    run_dir = job.run_dir
+    model = spec.factory(
+        env_id=job.env_id,
+        env_kwargs=dict(job.env_kwargs),
+        seed=job.seed,
+        tensorboard_log=str(job.tensorboard_log),
+        device=job.device,
+        hyperparams=dict(job.hyperparams),
+        verbose=job.verbose,
+    )
+    eval_kwargs = dict(job.env_kwargs if job.eval_env_kwargs is None else job.eval_env_kwargs)
+    eval_env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
+    try:
+        # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
+        eval_callback = EvalCallback(
+            eval_env,
+            n_eval_episodes=job.eval_episodes,
+            eval_freq=max(job.eval_freq // model.n_envs, 1),
+            log_path=str(run_dir),
+            deterministic=True,
+            verbose=0,
+            warn=False,
+        )
+        extra = spec.callbacks(job.timesteps) if spec.callbacks is not None else []
+        learn_start = time.perf_counter()
+        model.learn(
+            total_timesteps=job.timesteps,
+            callback=CallbackList([*extra, eval_callback]),
+            tb_log_name=job.tb_log_name,
+            progress_bar=job.progress_bar,
+        )
+        learn_time = time.perf_counter() - learn_start
+        timesteps = int(model.num_timesteps)
+        eval_start = time.perf_counter()
+        # An evaluation EvalCallback just ran at the final step is the final evaluation (same call, same env):
+        # reuse it rather than pay for the episodes twice, which for a planner costs as much as learning.
+        reused = last_evaluation(eval_callback, timesteps, job.eval_episodes)
+        episodes = reused or evaluate_episodes(model, eval_env, job.eval_episodes)
+        eval_time = time.perf_counter() - eval_start
+        append_evaluation(run_dir / "evaluations.npz", timesteps, episodes)
+        _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
+        model.save(run_dir / "model.zip")
+        wall_time = time.perf_counter() - start
+        metrics = {
+            "env_id": job.env_id,
+            "agent": job.agent,
+            "seed": job.seed,
+            "budget": job.timesteps,
+            "timesteps": timesteps,
+            "budget_respected": timesteps == job.timesteps,
+            "n_envs": int(model.n_envs),
+            "score_mean": episodes.score_mean,
+            "score_std": episodes.score_std,
+            "episode_scores": episodes.scores,
+            "episode_lengths": episodes.lengths,
+            "success_rate": episodes.success_rate,
+            "episode_successes": episodes.successes,
+            "final_evaluation": "EvalCallback at the final step" if reused else "evaluate_policy after learn",
+            "wall_time_s": wall_time,
+            "learn_time_s": learn_time,
+            "eval_time_s": eval_time,
+            "versions": library_versions(),
+        }
+        (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+        return JobResult(
+            job=job,
+            status="ok",
+            timesteps=timesteps,
+            score_mean=episodes.score_mean,
+            score_std=episodes.score_std,
+            episode_scores=tuple(episodes.scores),
+            episode_lengths=tuple(episodes.lengths),
+            success_rate=episodes.success_rate,
+            wall_time_s=wall_time,
+        )
+    finally:
+        eval_env.close()
+        if getattr(model, "_logger", None) is not None:
+            model.logger.close()  # releases the event file: a sweep runs many jobs in one process
+        training_env = model.get_env()
+        if training_env is not None:
+            training_env.close()
+
+
+def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, success_rate: float | None) -> None:
+    """Write the final evaluation to TensorBoard, into the model's own run folder when it has one.
+
+    An agent that ignored ``tensorboard_log`` gets a folder of its own, so that every run shows up.
+    """
+    from stable_baselines3.common.logger import TensorBoardOutputFormat, configure
+
+    logger = model.logger if getattr(model, "_logger", None) is not None else None
+    owns_logger = logger is None or not any(isinstance(f, TensorBoardOutputFormat) for f in logger.output_formats)
+    if owns_logger:
+        logger = configure(str(job.tensorboard_log / f"{job.tb_log_name}_1"), ["tensorboard"])
+    assert logger is not None
+    logger.record("final/score_mean", score_mean)
+    if success_rate is not None:
+        logger.record("final/success_rate", success_rate)
+    logger.dump(timesteps)
+    if owns_logger:
+        logger.close()
+
+
+__all__ = ["EVAL_SEED_OFFSET", "Job", "JobResult", "env_short_name", "library_versions", "run_job", "to_plain"]

@@ -1,0 +1,205 @@
+"""The agents the harness can train, by name: how to build each one and which extra callbacks it needs.
+
+Each factory imports its agent lazily, inside the function, so that ``import eval`` works before (and
+without) every agent package, and a process-pool worker imports only the agent it runs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, Protocol
+
+if TYPE_CHECKING:  # SB3 (and torch) load only when an agent is built, so `ebm-eval --help` answers at once
+    from stable_baselines3.common.base_class import BaseAlgorithm
+    from stable_baselines3.common.callbacks import BaseCallback
+
+
+class AgentFactory(Protocol):
+    """Builds an untrained SB3-style model for one run."""
+
+    def __call__(
+        self,
+        env_id: str,
+        env_kwargs: dict[str, Any],
+        seed: int,
+        tensorboard_log: str | None,
+        device: str,
+        hyperparams: dict[str, Any],
+        verbose: int,
+    ) -> BaseAlgorithm:
+        """Build the model.
+
+        :param env_id: registered Gymnasium id of the training env.
+        :param env_kwargs: keyword arguments for ``gym.make``.
+        :param seed: seed of the model and of its training env.
+        :param tensorboard_log: TensorBoard root folder (the run subfolder comes from ``tb_log_name``).
+        :param device: torch device ("auto", "cpu", "cuda", ...).
+        :param hyperparams: agent keyword arguments (a private copy: the factory may pop from it).
+        :param verbose: SB3 verbosity level.
+        :return: the model, ready for ``learn``.
+        """
+        ...
+
+
+@dataclass(frozen=True)
+class AgentSpec:
+    """How the harness builds and trains one kind of agent.
+
+    :param factory: builds the model (see ``AgentFactory``).
+    :param tb_log_name: the agent's own name, used as its label in tables and plots.
+    :param callbacks: extra callbacks for ``learn`` given the budget (e.g. PPO's exact-budget stop), or None.
+    :param description: one line for ``ebm-eval --help``.
+    """
+
+    factory: Callable[..., BaseAlgorithm]
+    tb_log_name: str
+    callbacks: Callable[[int], list[BaseCallback]] | None = None
+    description: str = ""
+
+
+def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
+    """``MultiInputPolicy`` for Dict observations (the ``ebm/`` goal envs), ``MlpPolicy`` otherwise."""
+    import gymnasium as gym
+
+    env = gym.make(env_id, **env_kwargs)
+    try:
+        return "MultiInputPolicy" if isinstance(env.observation_space, gym.spaces.Dict) else "MlpPolicy"
+    finally:
+        env.close()
+
+
+def _training_env(env_id: str, env_kwargs: dict[str, Any], seed: int, hyperparams: dict[str, Any]) -> Any:
+    """A Monitor-wrapped ``VecEnv`` with ``hyperparams.pop("n_envs", 1)`` copies of the env."""
+    from stable_baselines3.common.env_util import make_vec_env
+
+    n_envs = int(hyperparams.pop("n_envs", 1))
+    return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
+
+
+def make_ebm(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    tensorboard_log: str | None,
+    device: str,
+    hyperparams: dict[str, Any],
+    verbose: int = 0,
+) -> BaseAlgorithm:
+    """Build the EBM planning agent (single env unless ``n_envs`` is given). See ``AgentFactory``."""
+    from ebm_agent.agent import EBMPlannerAgent
+
+    env = _training_env(env_id, env_kwargs, seed, hyperparams)
+    policy = _policy_for(env_id, env_kwargs)
+    return EBMPlannerAgent(
+        policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
+    )
+
+
+def make_action_ff(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    tensorboard_log: str | None,
+    device: str,
+    hyperparams: dict[str, Any],
+    verbose: int = 0,
+) -> BaseAlgorithm:
+    """Build the action-conditioned feed-forward baseline (same API as the EBM agent). See ``AgentFactory``."""
+    from baselines import ActionFFAgent  # type: ignore[attr-defined]
+
+    env = _training_env(env_id, env_kwargs, seed, hyperparams)
+    policy = _policy_for(env_id, env_kwargs)
+    return ActionFFAgent(
+        policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
+    )
+
+
+def make_random(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    tensorboard_log: str | None,
+    device: str,
+    hyperparams: dict[str, Any],
+    verbose: int = 0,
+) -> BaseAlgorithm:
+    """Build the uniform random-exploration agent. See ``AgentFactory``."""
+    from baselines.random_agent import RandomAgent
+
+    env = _training_env(env_id, env_kwargs, seed, hyperparams)
+    policy = _policy_for(env_id, env_kwargs)
+    return RandomAgent(policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams)
+
+
+def make_ppo_agent(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    tensorboard_log: str | None,
+    device: str,
+    hyperparams: dict[str, Any],
+    verbose: int = 0,
+) -> BaseAlgorithm:
+    """Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``. See ``AgentFactory``."""
+    from baselines.ppo import make_ppo
+
+    # make_ppo builds its own VecEnv from the id, with the tuned n_envs (``n_envs`` in hyperparams overrides it).
+    return make_ppo(
+        env_id,
+        seed=seed,
+        tensorboard_log=tensorboard_log,
+        verbose=verbose,
+        device=device,
+        env_kwargs=env_kwargs or None,
+        **hyperparams,
+    )
+
+
+def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
+    """PPO collects whole rollouts, so it needs a callback to stop at exactly the budget.
+
+    :param total_timesteps: the transition budget.
+    :return: ``[baselines.ppo.exact_budget_callback(total_timesteps)]``.
+    """
+    from baselines.ppo import exact_budget_callback
+
+    return [exact_budget_callback(total_timesteps)]
+
+
+AGENTS: dict[str, AgentSpec] = {
+    "ebm": AgentSpec(make_ebm, "EBM", description="energy-based planner (the agent under test)"),
+    "ppo": AgentSpec(make_ppo_agent, "PPO", ppo_callbacks, description="SB3 PPO with tuned per-env hyperparameters"),
+    "action-ff": AgentSpec(make_action_ff, "ActionFF", description="action-conditioned feed-forward model + MPPI"),
+    "random": AgentSpec(make_random, "Random", description="uniform random actions (exploration baseline)"),
+}
+"""Agent names accepted by ``--agents`` / ``--baseline``, mapped to their specs. Tests may register more."""
+
+
+def register_agent(name: str, spec: AgentSpec, overwrite: bool = False) -> None:
+    """Add an agent to ``AGENTS`` (in this process: a spawned worker sees only the built-in ones).
+
+    :param name: the name used on the command line and in run folders.
+    :param spec: how to build and train it.
+    :param overwrite: replace an existing entry instead of raising.
+    """
+    if not isinstance(spec, AgentSpec):
+        raise TypeError(f"spec must be an AgentSpec, got {type(spec).__name__}")
+    if name in AGENTS and not overwrite:
+        raise ValueError(f"agent {name!r} is already registered; pass overwrite=True to replace it")
+    AGENTS[name] = spec
+
+
+def get_agent(name: str) -> AgentSpec:
+    """Look an agent up by name.
+
+    :param name: a key of ``AGENTS``.
+    :return: its spec.
+    """
+    try:
+        return AGENTS[name]
+    except KeyError:
+        raise ValueError(f"unknown agent {name!r}; choose one of: {', '.join(sorted(AGENTS))}") from None
+
+
+__all__ = ["AGENTS", "AgentFactory", "AgentSpec", "get_agent", "register_agent"]
