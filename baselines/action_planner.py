@@ -9,6 +9,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from ebm_agent.config import check_field_types
+
 ForwardModel = Callable[[Tensor, Tensor], Tensor]
 """f(states [..., D], actions [..., A]) -> next states [..., D]."""
 
@@ -38,6 +40,7 @@ class ActionPlannerConfig:
     gradient_noise: float = 0.01
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         if self.method not in ("mppi", "gradient"):
             raise ValueError(f"ActionPlannerConfig.method must be 'mppi' or 'gradient', got {self.method!r}.")
         for name in ("horizon", "num_samples"):

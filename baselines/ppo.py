@@ -153,7 +153,7 @@ class ExactBudgetCallback(BaseCallback):
         super().__init__(verbose=verbose)
         if isinstance(total_timesteps, bool) or not isinstance(total_timesteps, numbers.Integral) or total_timesteps < 1:
             raise ValueError(f"total_timesteps must be a positive int, got {total_timesteps!r}.")
-        self.total_timesteps = int(total_timesteps)
+        self.total_timesteps: int = int(total_timesteps)
 
     def _on_step(self) -> bool:
         if self.num_timesteps < self.total_timesteps:

@@ -13,7 +13,7 @@ from stable_baselines3.common.type_aliases import GymEnv
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBuffer
-from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.config import OnlineConfig, check_field_types, make_config
 from ebm_agent.costs import (
     AccelerationPrior,
     ExtraEnergy,
@@ -50,21 +50,23 @@ PLANNERS: dict[str, tuple[type, type]] = {"mppi": (MPPIPlanner, MPPIConfig), "la
 class CostConfig:
     """The plan cost besides the learned energy; defaults follow the original code (§3).
 
-    :param goal_energy: ``"gaussian"`` (paper Eq. 6), ``"ramped"`` (the original's time-ramped goal over every
-        state) or ``"reward"`` (maximum-entropy form with R = -L1 distance to the goal).
+    :param goal_energy: ``"reward"`` (the paper's maximum-entropy form, Sec. 3.2, with R = -L1 distance to the goal,
+        the particle/maze/Reacher reward: a linear pull that keeps infeasible shortcuts expensive yet is precise at the
+        goal), ``"gaussian"`` (paper Eq. 6, (s_T - g)^2) or ``"ramped"`` (the original code's time-ramped goal).
     :param goal_weight: weight of the goal term (g_coeff).
     :param eval_goal_weight: goal weight used by ``predict`` (the original evaluated the arm with 10); None = same.
     :param velocity_weight: weight of the velocity prior (v_coeff).
     :param acceleration_weight: weight of the acceleration prior (a_coeff).
     """
 
-    goal_energy: str = "ramped"
+    goal_energy: str = "reward"
     goal_weight: float = 1.0
     eval_goal_weight: float | None = None
     velocity_weight: float = 0.0
     acceleration_weight: float = 1.0
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         if self.goal_energy not in GOAL_ENERGIES:
             raise ValueError(f"CostConfig.goal_energy must be one of {sorted(GOAL_ENERGIES)}, got {self.goal_energy!r}.")
         for name in ("goal_weight", "velocity_weight", "acceleration_weight"):

@@ -21,6 +21,7 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import configure_logger, safe_mean
 
 from ebm_agent.buffers import TransitionBatch, TransitionBuffer
+from ebm_agent.checkpoint import CheckpointMixin
 from ebm_agent.config import OnlineConfig, make_config
 from ebm_agent.datasets import TransitionDataset, iterate_minibatches
 from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces, env_inverse_dynamics, read_goal_spec
@@ -51,7 +52,7 @@ class Segment:
     actions: np.ndarray
 
 
-class PlannerAgentBase(BaseAlgorithm):
+class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     """Base class of agents that plan a state trajectory, act along it and learn their model online.
 
     :param policy: ``"MultiInputPolicy"`` (the only alias; the networks are built by the subclass).
@@ -275,8 +276,19 @@ class PlannerAgentBase(BaseAlgorithm):
             )
         spec = self.goal_spec
         assert spec is not None
-        state = np.asarray(observation["observation"], dtype=np.float32)
-        goal = np.asarray(observation["desired_goal"], dtype=np.float32)
+        arrays = {}
+        for key, dim in (("observation", spec.state_dim), ("desired_goal", spec.goal_dim)):
+            raw = np.asarray(observation[key])
+            if raw.dtype.kind not in "biuf":
+                raise TypeError(
+                    f"predict: observation[{key!r}] has dtype {raw.dtype}; pass real numbers (float32, as the env returns)."
+                )
+            if raw.ndim not in (1, 2):
+                raise ValueError(
+                    f"predict: observation[{key!r}] has shape {raw.shape}; pass one observation [{dim}] or a batch [N, {dim}]."
+                )
+            arrays[key] = raw.astype(np.float32)
+        state, goal = arrays["observation"], arrays["desired_goal"]
         vectorized = state.ndim == 2
         state, goal = state.reshape(-1, state.shape[-1]), goal.reshape(-1, goal.shape[-1])
         if state.shape[1] != spec.state_dim or goal.shape[1] != spec.goal_dim or len(state) != len(goal):
@@ -286,7 +298,28 @@ class PlannerAgentBase(BaseAlgorithm):
             )
         batch = {"observation": state, "desired_goal": goal}
         check_finite_observation(batch, f"{type(self).__name__}.predict")
+        self._check_goal_bounds(goal, "predict")
         return batch, vectorized
+
+    def _check_goal_bounds(self, goal: np.ndarray, where: str) -> None:
+        """Reject goals outside the state bounds that plans are clipped to: no plan could reach them.
+
+        :param goal: [N, G] goals.
+        :param where: caller name for the message.
+        :raises ValueError: naming the goal and the bounds.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        if spec.state_low is None or spec.state_high is None or spec.goal_period is not None:
+            return
+        low, high = spec.state_low[spec.goal_indices], spec.state_high[spec.goal_indices]
+        outside = ((goal < low - 1e-6) | (goal > high + 1e-6)).any(axis=1)
+        if outside.any():
+            raise ValueError(
+                f"{where}: desired_goal {goal[outside][0].tolist()} lies outside the state bounds "
+                f"[{low.tolist()}, {high.tolist()}] that plans are clipped to, so no plan can reach it. "
+                "Set a goal inside the bounds."
+            )
 
     def _fresh_generator(self, deterministic: bool) -> torch.Generator:
         if not deterministic:
@@ -405,6 +438,7 @@ class PlannerAgentBase(BaseAlgorithm):
             check_finite_observation(obs, f"{type(self).__name__}.learn")
             states = np.asarray(obs["observation"], dtype=np.float32)
             goals = np.asarray(obs["desired_goal"], dtype=np.float32)
+            self._check_goal_bounds(goals, f"{type(self).__name__}.learn")
             if need.any():
                 idx = np.where(need)[0]
                 init = None

@@ -9,6 +9,7 @@ candidates by softmax(-cost / temperature), i.e. the cost is the negative log of
 from __future__ import annotations
 
 import copy
+import functools
 import re
 from collections.abc import Callable, Sequence
 from typing import Protocol, runtime_checkable
@@ -271,6 +272,7 @@ class BoxObstacleEnergy:
         self.weight = float(weight)
         self.margin = float(margin)
         self.samples_per_segment = int(samples_per_segment)
+        self._box_cache: dict[str, object] = {}
 
     def penetration_depth(self, points: Tensor) -> Tensor:
         """
@@ -279,10 +281,18 @@ class BoxObstacleEnergy:
         :param points: positions [..., len(dims)] (already restricted to the box dims).
         :return: depths [...], >= 0.
         """
-        low = (self.low - self.margin).to(device=points.device, dtype=points.dtype)
-        high = (self.high + self.margin).to(device=points.device, dtype=points.dtype)
+        low, high = self._grown_box(points.device, points.dtype)
         distance_to_faces = torch.minimum(points - low, high - points)  # [..., B] negative outside on that axis
         return distance_to_faces.amin(-1).clamp_min(0.0)
+
+    def _grown_box(self, device: torch.device, dtype: torch.dtype) -> tuple[Tensor, Tensor]:
+        # Cached per device and dtype: a fresh host-to-device copy in every MPPI iteration would sync a CUDA stream.
+        key = (device, dtype, self.margin, id(self.low), id(self.high))
+        if self._box_cache.get("key") != key:
+            low = (self.low - self.margin).to(device=device, dtype=dtype)
+            high = (self.high + self.margin).to(device=device, dtype=dtype)
+            self._box_cache = {"key": key, "box": (low, high)}
+        return self._box_cache["box"]  # type: ignore[return-value]
 
     def __call__(self, plans: Tensor) -> Tensor:
         """
@@ -341,7 +351,7 @@ class PlanCost:
         :param goals: goals [N, G], or None when there is no goal energy.
         :return: total costs [N, K].
         """
-        return torch.stack(list(self.terms(plans, goals).values())).sum(0)
+        return torch.stack(self._term_values(plans, goals)).sum(0)
 
     def terms(self, plans: Tensor, goals: Tensor | None) -> dict[str, Tensor]:
         """
@@ -352,17 +362,26 @@ class PlanCost:
         :return: {"transition": [N, K], "goal": [N, K], one entry per extra energy named after its class}; a term
             that is not configured is absent, except "transition", which is zeros without a transition energy.
         """
+        values = iter(self._term_values(plans, goals))
+        terms = {"transition": next(values)}
+        if self.goal_energy is not None:
+            terms["goal"] = next(values)
+        for extra in self.extra_energies:
+            terms[_unique_name(_snake_case(type(extra).__name__), terms)] = next(values)
+        return terms
+
+    def _term_values(self, plans: Tensor, goals: Tensor | None) -> list[Tensor]:
+        # The unnamed terms in the order of terms(): __call__ runs once per MPPI iteration, so it skips the naming.
         if plans.ndim != 4 or plans.shape[-2] < 2:
             raise ValueError(f"plans must be [N, K, T+1, D] with T >= 1, got shape {tuple(plans.shape)}.")
-        terms = {"transition": self._transition_term(plans)}
+        values = [self._transition_term(plans)]
         if self.goal_energy is not None:
             if goals is None:
                 raise ValueError("this PlanCost has a goal energy, so goals [N, G] must be given (got None).")
-            terms["goal"] = self._checked(self.prior_scale * self.goal_energy(plans, goals), plans, "goal energy")
+            values.append(self._checked(self.prior_scale * self.goal_energy(plans, goals), plans, "goal energy"))
         for extra in self.extra_energies:
-            name = _unique_name(_snake_case(type(extra).__name__), terms)
-            terms[name] = self._checked(self.prior_scale * extra(plans), plans, name)
-        return terms
+            values.append(self._checked(self.prior_scale * extra(plans), plans, type(extra).__name__))
+        return values
 
     def with_extra(self, *extra: ExtraEnergy) -> PlanCost:
         """
@@ -385,6 +404,10 @@ class PlanCost:
                 f"transition_energy must return one energy per transition, shape {tuple(expected)}, got "
                 f"{tuple(energies.shape)}; an nn.Module energy should squeeze its last output dim."
             )
+        if energies.dtype != plans.dtype and energies.dtype.is_floating_point:
+            # An energy run under autocast returns bf16/fp16; summing T of those in reduced precision loses the
+            # small differences MPPI's low temperature resolves, so the sum runs in the plans' dtype.
+            energies = energies.to(plans.dtype)
         if self.transition_weights == "linear_decay":
             horizon = energies.shape[-1]
             # T - t for t = 0..T-1: early transitions matter most, as the original's gradient planner weighted them.
@@ -404,7 +427,16 @@ class PlanCost:
 def _select(tensor: Tensor, indices: tuple[int, ...]) -> Tensor:
     if max(indices) >= tensor.shape[-1]:
         raise ValueError(f"state dims {indices} are out of range for states with {tensor.shape[-1]} dims.")
-    return tensor[..., list(indices)]
+    run = _as_slice(indices)
+    # A run of consecutive dims (the usual goal and position dims) is a view: no gather copy, and on CUDA no
+    # host-to-device transfer of an index list in every planner iteration.
+    return tensor[..., list(indices)] if run is None else tensor[..., run]
+
+
+@functools.lru_cache(maxsize=256)
+def _as_slice(indices: tuple[int, ...]) -> slice | None:
+    first = indices[0]
+    return slice(first, first + len(indices)) if indices == tuple(range(first, first + len(indices))) else None
 
 
 def _check_indices(indices: Sequence[int], name: str) -> tuple[int, ...]:

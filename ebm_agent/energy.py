@@ -9,6 +9,7 @@ import torch
 from torch import Tensor, nn
 from torch.nn.utils import parametrize
 
+from ebm_agent.config import check_field_types
 from ebm_agent.networks import build_mlp, make_activation, normalise_dims
 
 __all__ = ["EnergyConfig", "EnergyModel"]
@@ -34,6 +35,7 @@ class EnergyConfig:
     positive_output: bool = True
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         if not isinstance(self.hidden_dim, int) or self.hidden_dim < 1:
             raise ValueError(f"EnergyConfig.hidden_dim must be a positive int, got {self.hidden_dim!r}.")
         if not isinstance(self.num_hidden_layers, int) or self.num_hidden_layers < 0:

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from ebm_agent.config import check_field_types
 from ebm_agent.costs import PlanCost
 from ebm_agent.planner import PlanResult, as_bounds, clip_states, initial_plan, validate_plan_inputs
 
@@ -42,6 +43,7 @@ class LangevinConfig:
     grad_clip: float | None = 0.05
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         if isinstance(self.horizon, bool) or not isinstance(self.horizon, int) or self.horizon < 1:
             raise ValueError(f"LangevinConfig.horizon must be an int >= 1, got {self.horizon!r}.")
         if isinstance(self.iterations, bool) or not isinstance(self.iterations, int) or self.iterations < 0:

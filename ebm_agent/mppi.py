@@ -2,11 +2,16 @@
 
 Each iteration perturbs the current mean plan's states s_1..s_T (the start is pinned) with K smooth noise samples,
 scores all N x K candidates with one cost call, and moves the mean to their softmax(-cost / temperature) average.
+The whole iteration is batched over envs, candidates and time, and nothing in the loop reads a tensor back to the
+host, so on CUDA the iterations queue up without synchronising.
 """
 
 from __future__ import annotations
 
+import copy
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -16,7 +21,20 @@ from ebm_agent.costs import PlanCost
 from ebm_agent.planner import PlanResult, as_bounds, clip_states, initial_plan, validate_plan_inputs
 from ebm_agent.stomp import StompNoise
 
-__all__ = ["MPPIConfig", "MPPIPlanner"]
+__all__ = ["AUTOCAST_DTYPES", "CPU_CHUNK_TRANSITIONS", "NOISE_BLOCK_BYTES", "MPPIConfig", "MPPIPlanner", "softmax_average"]
+
+AUTOCAST_DTYPES: dict[str, torch.dtype] = {"bf16": torch.bfloat16, "fp16": torch.float16}
+"""Names accepted by ``MPPIConfig.autocast`` and the dtype the cost's matmuls then run in."""
+
+NOISE_BLOCK_BYTES = 16 * 2**20
+"""The noise of several iterations is drawn in one call when it fits in this many bytes (one randn + one matmul
+instead of one per iteration); larger problems draw it iteration by iteration."""
+
+CPU_CHUNK_TRANSITIONS = 4096
+"""Default ``MPPIConfig.chunk_transitions`` on CPU: an MLP energy on 4,096 transitions keeps its activations
+(4,096 x 128 floats per layer) in cache; one call on 81,920 was 3x slower per transition on the benchmark machine."""
+
+CostFn = Callable[[Tensor, Tensor | None], Tensor]
 
 
 @dataclass
@@ -34,6 +52,19 @@ class MPPIConfig:
     :param terminal_first_difference: keep the original's terminal first-difference row in the STOMP matrix.
     :param include_mean: also score the current mean as a candidate (the original did not), so the mean can only
         be replaced by a candidate that is at least as good when the temperature is low.
+    :param compile: ``torch.compile`` the transition energy and the softmax-averaging step on first use. The first
+        plan then pays the compilation (15-25 s on CPU); later plans reuse it. Off by default: on the benchmark
+        machines it gave no consistent gain (docs/benchmarks.md).
+    :param compile_options: keyword arguments of ``torch.compile`` (e.g. ``{"mode": "max-autotune"}`` or
+        ``{"backend": "aot_eager"}``), or None for its defaults; only used with ``compile=True``.
+    :param chunk_transitions: score the candidates in chunks along K of about this many transitions (N x k x T)
+        per cost call; None picks ``CPU_CHUNK_TRANSITIONS`` on CPU and no chunking on other devices, 0 disables it.
+        Chunking changes nothing but the batch size of the energy's matmuls (results agree to float rounding).
+    :param autocast: ``"bf16"`` or ``"fp16"`` to evaluate the cost under ``torch.autocast`` (the energy's matmuls
+        in that dtype, the sums over time, the softmax and the plan itself in float32), or None for float32. bf16
+        keeps about 3 significant digits of each energy, which is coarse next to the default temperature of 1e-4:
+        plans differ from float32 ones by about the noise scale (tests/agent/test_mppi_speed_paths.py); 1.5-3x
+        faster for K x T >= 5,000 on CPU.
     """
 
     horizon: int = 10
@@ -43,6 +74,10 @@ class MPPIConfig:
     noise_scale: float = 1e-5
     terminal_first_difference: bool = True
     include_mean: bool = False
+    compile: bool = False
+    compile_options: dict[str, Any] | None = None
+    chunk_transitions: int | None = None
+    autocast: str | None = None
 
     def __post_init__(self) -> None:
         for name in ("horizon", "num_samples"):
@@ -55,6 +90,22 @@ class MPPIConfig:
             raise ValueError(f"MPPIConfig.temperature must be > 0, got {self.temperature}; the original used 1e-4.")
         if not self.noise_scale > 0:
             raise ValueError(f"MPPIConfig.noise_scale must be > 0, got {self.noise_scale}; the original used 1e-5.")
+        if not isinstance(self.compile, bool):
+            raise TypeError(f"MPPIConfig.compile must be True or False, got {self.compile!r}.")
+        if self.compile_options is not None and not isinstance(self.compile_options, dict):
+            raise TypeError(
+                f"MPPIConfig.compile_options must be a dict of torch.compile keyword arguments or None, "
+                f"got {type(self.compile_options).__name__}."
+            )
+        chunk = self.chunk_transitions
+        if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 0):
+            raise ValueError(
+                f"MPPIConfig.chunk_transitions must be None (automatic), 0 (no chunking) or an int > 0, got {chunk!r}."
+            )
+        if self.autocast is not None and self.autocast not in AUTOCAST_DTYPES:
+            raise ValueError(
+                f"MPPIConfig.autocast must be None (float32) or one of {sorted(AUTOCAST_DTYPES)}, got {self.autocast!r}."
+            )
 
 
 class MPPIPlanner:
@@ -89,6 +140,9 @@ class MPPIPlanner:
         low, high = as_bounds(state_low, state_high, state_dim)
         self.state_low = None if low is None else low.to(self.device)
         self.state_high = None if high is None else high.to(self.device)
+        # Compiled callables, built on first use; not pickled (the agent saves the planner with the model).
+        self._compiled_energy: tuple[object, Callable[..., Tensor]] | None = None
+        self._compiled_mix: Callable[..., Tensor] | None = None
 
     def plan(
         self,
@@ -111,7 +165,7 @@ class MPPIPlanner:
         :param generator: random generator on the planner's device; the same seed gives the same plan.
         :param iterations: override ``config.iterations``.
         :param noise: pre-drawn perturbations [I, N, K, T, D] to use instead of sampling (for tests and
-            reproducibility across batch sizes); I is then the number of iterations.
+            reproducibility across batch sizes, see :meth:`draw_noise`); I is then the number of iterations.
         :return: the plans [N, T+1, D] with ``plans[:, 0] == start``, their costs [N], and the iterations run.
         """
         validate_plan_inputs(start, goals, init_plan, self.horizon, self.state_dim, iterations)
@@ -130,15 +184,33 @@ class MPPIPlanner:
             mean = initial_plan(start, self.horizon) if init_plan is None else init_plan.to(self.device, start.dtype).clone()
             mean[:, 0] = start
             mean[:, 1:] = clip_states(mean[:, 1:], self.state_low, self.state_high)
-            for iteration in range(num_iterations):
-                if noise is None:
-                    perturbation = self.noise.sample((num_envs, self.config.num_samples), self.state_dim, generator)
-                else:
-                    perturbation = noise[iteration].to(self.device)
-                mean = self.update(mean, perturbation.to(start.dtype), goals, cost)
-            final_costs = cost(mean[:, None], goals)[:, 0]  # [N]
+            # One transfer of user noise before the loop rather than one per iteration.
+            blocks = (
+                self._noise_blocks(num_envs, num_iterations, generator) if noise is None else iter([noise.to(self.device)])
+            )
+            candidates = self._candidate_buffer(start)  # [N, K', T+1, D]
+            cost_fn = self._fast_cost(cost)
+            for block in blocks:  # [B, N, K, T, D] noise of B iterations
+                for perturbation in block.to(start.dtype):
+                    mean[:, 1:] = self._step(mean, perturbation, goals, cost_fn, candidates)
+            final_costs = cost(mean[:, None], goals)[:, 0]  # [N], at full precision whatever the autocast
         # Cloning outside inference mode gives ordinary tensors that the agent may later feed to a trained energy.
         return PlanResult(plans=mean.clone(), costs=final_costs.clone(), iterations=num_iterations)
+
+    def draw_noise(self, num_envs: int, iterations: int, generator: torch.Generator | None = None) -> Tensor:
+        """
+        The perturbations ``plan`` draws from ``generator`` for ``num_envs`` envs, drawn the same way.
+
+        ``plan(..., noise=draw_noise(N, I, generator_seeded_s))`` equals ``plan(..., generator=generator_seeded_s)``;
+        slicing its env axis gives the noise of planning each env alone.
+
+        :param num_envs: N.
+        :param iterations: I.
+        :param generator: random generator on the planner's device.
+        :return: perturbations [I, N, K, T, D].
+        """
+        empty = torch.empty(0, num_envs, self.config.num_samples, self.horizon, self.state_dim, device=self.device)
+        return torch.cat([empty, *self._noise_blocks(num_envs, iterations, generator)])
 
     def update(self, mean: Tensor, perturbation: Tensor, goals: Tensor | None, cost: PlanCost) -> Tensor:
         """
@@ -150,23 +222,9 @@ class MPPIPlanner:
         :param cost: the cost of candidate plans.
         :return: the new plans [N, T+1, D], with the same start.
         """
-        start, mean_tail = mean[:, :1], mean[:, 1:]  # [N, 1, D], [N, T, D]
-        candidate_tails = clip_states(mean_tail[:, None] + perturbation, self.state_low, self.state_high)  # [N, K, T, D]
-        if self.config.include_mean:
-            candidate_tails = torch.cat([mean_tail[:, None], candidate_tails], dim=1)  # [N, K+1, T, D]
-        num_candidates = candidate_tails.shape[1]
-        starts = start[:, None].expand(-1, num_candidates, -1, -1)  # [N, K, 1, D]
-        candidates = torch.cat([starts, candidate_tails], dim=2)  # [N, K, T+1, D]
-        costs = cost(candidates, goals)  # [N, K]
-        # A NaN or infinite cost (e.g. an energy that blew up) gets zero weight instead of poisoning the average.
-        finite = torch.isfinite(costs)
-        costs = torch.where(finite, costs, torch.full_like(costs, float("inf")))
-        weights = torch.softmax(-costs / self.config.temperature, dim=1)  # [N, K]
-        new_tail = (weights[:, :, None, None] * candidate_tails).sum(dim=1)  # [N, T, D]
-        new_tail = clip_states(new_tail, self.state_low, self.state_high)
-        # An env whose candidates all have non-finite costs keeps its mean.
-        new_tail = torch.where(finite.any(dim=1)[:, None, None], new_tail, mean_tail)
-        return torch.cat([start, new_tail], dim=1)
+        candidates = self._candidate_buffer(mean[:, 0])
+        new_tail = self._step(mean, perturbation.to(mean.dtype), goals, self._fast_cost(cost), candidates)
+        return torch.cat([mean[:, :1], new_tail], dim=1)
 
     def to(self, device: str | torch.device) -> MPPIPlanner:
         """
@@ -180,3 +238,108 @@ class MPPIPlanner:
         self.state_low = None if self.state_low is None else self.state_low.to(self.device)
         self.state_high = None if self.state_high is None else self.state_high.to(self.device)
         return self
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_compiled_energy"] = None
+        state["_compiled_mix"] = None
+        return state
+
+    # ------------------------------------------------------------------ helpers
+    def _step(self, mean: Tensor, perturbation: Tensor, goals: Tensor | None, cost_fn: CostFn, candidates: Tensor) -> Tensor:
+        """One iteration written into the reused candidate buffer; returns the new tail [N, T, D]."""
+        mean_tail = mean[:, 1:]  # [N, T, D]
+        candidate_tails = candidates[:, :, 1:]  # [N, K', T, D] view; candidates[:, :, 0] holds the start already
+        first = 1 if self.config.include_mean else 0
+        # Writing into the buffer replaces the per-iteration cat that pinned the start to every candidate.
+        sampled = candidate_tails[:, first:]  # [N, K, T, D]
+        torch.add(mean_tail[:, None], perturbation, out=sampled)
+        if self.state_low is not None or self.state_high is not None:
+            low = None if self.state_low is None else self.state_low.to(sampled.dtype)
+            high = None if self.state_high is None else self.state_high.to(sampled.dtype)
+            sampled.clamp_(min=low, max=high)
+        if first:
+            candidate_tails[:, 0] = mean_tail
+        costs = self._score(cost_fn, candidates, goals).to(mean.dtype)  # [N, K']
+        mix = self._mix_fn()
+        return mix(costs, candidate_tails, mean_tail, self.config.temperature, self.state_low, self.state_high)
+
+    def _score(self, cost_fn: CostFn, candidates: Tensor, goals: Tensor | None) -> Tensor:
+        """The costs [N, K'] of the candidates, in chunks along K' when the problem is large (see chunk_transitions)."""
+        limit = self.config.chunk_transitions
+        if limit is None:
+            limit = CPU_CHUNK_TRANSITIONS if candidates.device.type == "cpu" else 0
+        num_envs, num_candidates = candidates.shape[:2]
+        per_chunk = max(1, limit // (num_envs * self.horizon))
+        if limit == 0 or per_chunk >= num_candidates:
+            return cost_fn(candidates, goals)
+        chunks = [cost_fn(candidates[:, first : first + per_chunk], goals) for first in range(0, num_candidates, per_chunk)]
+        return torch.cat(chunks, dim=1)
+
+    def _candidate_buffer(self, start: Tensor) -> Tensor:
+        num_candidates = self.config.num_samples + int(self.config.include_mean)
+        shape = (start.shape[0], num_candidates, self.horizon + 1, self.state_dim)
+        candidates = torch.empty(shape, device=start.device, dtype=start.dtype)  # [N, K', T+1, D]
+        candidates[:, :, 0] = start[:, None]
+        return candidates
+
+    def _noise_blocks(self, num_envs: int, iterations: int, generator: torch.Generator | None) -> Iterator[Tensor]:
+        """Perturbations [B, N, K, T, D] for B iterations at a time; the blocking depends only on the shapes."""
+        per_iteration = num_envs * self.config.num_samples * self.horizon * self.state_dim * self.noise.dtype.itemsize
+        block = max(1, min(iterations, NOISE_BLOCK_BYTES // max(per_iteration, 1)))
+        for first in range(0, iterations, block):
+            size = min(block, iterations - first)
+            yield self.noise.sample((size, num_envs, self.config.num_samples), self.state_dim, generator)
+
+    def _fast_cost(self, cost: PlanCost) -> CostFn:
+        """The cost as evaluated inside the loop: with the compiled transition energy and under autocast if set."""
+        cost_fn: CostFn = cost
+        energy = getattr(cost, "transition_energy", None)
+        if self.config.compile and isinstance(cost, PlanCost) and energy is not None:
+            if self._compiled_energy is None or self._compiled_energy[0] is not energy:
+                self._compiled_energy = (energy, torch.compile(energy, **(self.config.compile_options or {})))
+            # A shallow copy shares the goal energy, priors and prior_scale; only the transition energy is swapped.
+            fast = copy.copy(cost)
+            fast.transition_energy = self._compiled_energy[1]
+            cost_fn = fast
+        if self.config.autocast is None:
+            return cost_fn
+        device_type, dtype = self.device.type, AUTOCAST_DTYPES[self.config.autocast]
+        inner = cost_fn
+
+        def autocast_cost(plans: Tensor, goals: Tensor | None) -> Tensor:
+            with torch.autocast(device_type=device_type, dtype=dtype):
+                return inner(plans, goals)
+
+        return autocast_cost
+
+    def _mix_fn(self) -> Callable[..., Tensor]:
+        if not self.config.compile:
+            return softmax_average
+        if self._compiled_mix is None:
+            self._compiled_mix = torch.compile(softmax_average, **(self.config.compile_options or {}))
+        return self._compiled_mix
+
+
+def softmax_average(
+    costs: Tensor, candidate_tails: Tensor, mean_tail: Tensor, temperature: float, low: Tensor | None, high: Tensor | None
+) -> Tensor:
+    """
+    The MPPI mean update: the candidates averaged with weights softmax(-cost / temperature), clipped to the bounds.
+
+    :param costs: candidate costs [N, K].
+    :param candidate_tails: candidate states s_1..s_T [N, K, T, D].
+    :param mean_tail: current mean's s_1..s_T [N, T, D], kept by an env whose costs are all non-finite.
+    :param temperature: lambda > 0.
+    :param low: lower state bounds [D] or None.
+    :param high: upper state bounds [D] or None.
+    :return: the new mean's s_1..s_T [N, T, D].
+    """
+    # A NaN or infinite cost (e.g. an energy that blew up) gets zero weight instead of poisoning the average.
+    finite = torch.isfinite(costs)
+    costs = torch.where(finite, costs, torch.full_like(costs, float("inf")))
+    weights = torch.softmax(-costs / temperature, dim=1)  # [N, K]
+    new_tail = (weights[:, :, None, None] * candidate_tails).sum(dim=1)  # [N, T, D]
+    new_tail = clip_states(new_tail, low, high)
+    # An env whose candidates all have non-finite costs keeps its mean (a device-side select, no host sync).
+    return torch.where(finite.any(dim=1)[:, None, None], new_tail, mean_tail)

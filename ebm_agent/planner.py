@@ -144,6 +144,12 @@ def validate_plan_inputs(
     :param state_dim: D.
     :param iterations: iteration override, must be None or an int >= 0.
     """
+    for name, tensor in (("start", start), ("goals", goals), ("init_plan", init_plan)):
+        if isinstance(tensor, Tensor) and tensor.dtype.is_floating_point and not bool(torch.isfinite(tensor).all()):
+            raise ValueError(
+                f"{name} contains NaN or inf; the planner cannot plan from non-finite states. "
+                "Check the observation or goal passed."
+            )
     if not isinstance(start, Tensor) or not start.dtype.is_floating_point:
         raise TypeError(f"start must be a floating point tensor [N, D], got {type(start).__name__}.")
     if start.ndim != 2 or start.shape[1] != state_dim:

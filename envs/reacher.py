@@ -122,12 +122,17 @@ class ReacherEnv(gym.Env):
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict]:
         """Hold the torque ``action`` (in [-1, 1]^2, gear 200) for two RK4 steps.
 
-        :param action: [2] normalised torques; clipped to the action bounds.
+        :param action: [2] normalised torques; clipped to the action bounds (NaN/inf raise ValueError).
         :return: observation, reward, terminated, truncated (always False: TimeLimit truncates), info.
         """
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (2,):
             raise ValueError(f"Reacher expects an action of shape (2,), got {action.shape}.")
+        if not np.all(np.isfinite(action)):
+            # MuJoCo would only warn and silently reset the simulation; a NaN action is a bug in the caller.
+            raise ValueError(
+                f"Reacher got a non-finite action {action.tolist()}; actions must be finite (they are clipped to [-1, 1])."
+            )
         self.data.ctrl[:] = np.clip(action, -1.0, 1.0)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         self.physics_steps += self.frame_skip

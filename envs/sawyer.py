@@ -141,12 +141,17 @@ class SawyerReachEnv(gym.Env):
     def step(self, action: np.ndarray) -> tuple[dict[str, np.ndarray], float, bool, bool, dict]:
         """Hold the joint torques ``action * TORQUE_LIMITS`` for 5 physics steps.
 
-        :param action: [7] normalised torques; clipped to [-1, 1].
+        :param action: [7] normalised torques; clipped to [-1, 1] (NaN/inf raise ValueError).
         :return: observation, reward, terminated (always False), truncated (False: TimeLimit truncates), info.
         """
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (7,):
             raise ValueError(f"SawyerReach expects an action of shape (7,), got {action.shape}.")
+        if not np.all(np.isfinite(action)):
+            # MuJoCo would only warn and silently reset the simulation; a NaN action is a bug in the caller.
+            raise ValueError(
+                f"SawyerReach got a non-finite action {action.tolist()}; actions must be finite (they are clipped to [-1, 1])."
+            )
         self.data.ctrl[:] = np.clip(action, -1.0, 1.0)
         mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
         self.physics_steps += self.frame_skip

@@ -3,6 +3,7 @@
     ebm-eval --baseline ppo                       # EBM vs PPO on the particle env, small budget
     ebm-eval --config particle_online --jobs 2    # a bundled preset, two runs at a time
     ebm-eval --env maze --baseline ppo --baseline action-ff --seeds 0 1 2 --timesteps 50000
+    ebm-eval --config ray_sweep_example --executor ray --address auto   # on a Ray cluster (docs/ray.md)
 
 Settings come from three layers, the later winning: built-in defaults, the ``--config`` preset, explicit flags.
 """
@@ -12,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+import math
 import sys
 import time
 from collections.abc import Sequence
@@ -31,7 +33,7 @@ from eval.registry import AGENTS
 DEFAULTS: dict[str, Any] = {
     "env": ["particle"],
     "baseline": ["ppo"],
-    "timesteps": 5000,
+    "timesteps": 2000,
     "seeds": [0],
     "eval_episodes": 10,
     "eval_freq": None,  # timesteps // 5
@@ -41,6 +43,9 @@ DEFAULTS: dict[str, Any] = {
     "device": "auto",
     "jobs": 1,
     "executor": "local",
+    "address": None,  # Ray only: a local Ray instance
+    "cpus_per_job": None,  # Ray only: 1
+    "gpus_per_job": None,  # Ray only: 1 with a cuda device, else 0
     "out": None,  # runs/ebm-eval-<timestamp>
 }
 """Built-in defaults: ``ebm-eval`` alone runs EBM vs PPO on the particle env within minutes on 2 CPU cores."""
@@ -92,6 +97,21 @@ def parse_value(text: str) -> Any:
         except ValueError:
             return value
     return value
+
+
+def resource_amount(text: str) -> float:
+    """Argparse type: a non-negative number of CPUs or GPUs (fractions share one).
+
+    :param text: the flag's value.
+    :return: the number.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number of CPUs or GPUs such as 1 or 0.5, got {text!r}") from None
+    if not value >= 0 or value == float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text}")
+    return int(value) if value.is_integer() else value
 
 
 def key_value(text: str) -> tuple[str, Any]:
@@ -167,7 +187,28 @@ def build_parser() -> argparse.ArgumentParser:
         "-c", "--config", help="preset: a bundled name (see eval/presets/) or a YAML file; explicit flags win over it"
     )
     parser.add_argument("-j", "--jobs", type=positive_int, help="runs executed at once, one process each (default: 1)")
-    parser.add_argument("--executor", help="where runs execute: local (process pool; default) or ray (needs the ray extra)")
+    parser.add_argument(
+        "--executor",
+        help="where runs execute: local (process pool; default) or ray (Ray tasks, needs the ray extra; see docs/ray.md)",
+    )
+    parser.add_argument(
+        "--address",
+        help="with --executor ray: the Ray cluster, auto (the one this machine belongs to), ray://<head>:10001 "
+        "(Ray Client) or <head-ip>:6379 (default: a local Ray instance with --jobs x --cpus-per-job CPUs)",
+    )
+    parser.add_argument(
+        "--cpus-per-job",
+        type=resource_amount,
+        metavar="N",
+        help="with --executor ray: CPUs each run reserves, also its torch threads (default: 1)",
+    )
+    parser.add_argument(
+        "--gpus-per-job",
+        type=resource_amount,
+        metavar="N",
+        help="with --executor ray: GPUs each run reserves, 0.5 shares one between two (default: 1 with a cuda "
+        "--device, else 0; with 0 Ray hides the GPUs from the run)",
+    )
     parser.add_argument(
         "--env-kwargs",
         nargs="+",
@@ -243,9 +284,53 @@ def resolve_settings(args: argparse.Namespace) -> dict[str, Any]:
             raise ValueError(f"{key} must be a positive integer, got {settings[key]!r}")
     if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in settings["seeds"]):
         raise ValueError(f"seeds must be non-negative integers, got {settings['seeds']!r}")
+    _check_ray_settings(settings)
     if settings["out"] is None:
         settings["out"] = str(Path("runs") / time.strftime("ebm-eval-%Y%m%d-%H%M%S"))
     return settings
+
+
+RAY_ONLY = ("address", "cpus_per_job", "gpus_per_job")
+"""Settings that only the Ray executor reads."""
+
+
+def _check_ray_settings(settings: dict[str, Any]) -> None:
+    """Reject Ray-only settings without ``--executor ray`` and fill in their defaults with it."""
+    if settings["executor"] != "ray":
+        given = [key for key in RAY_ONLY if settings[key] is not None]
+        if given:
+            flags = ", ".join("--" + key.replace("_", "-") for key in given)
+            raise ValueError(f"{flags} only apply to --executor ray (the executor is {settings['executor']!r})")
+        return
+    if settings["cpus_per_job"] is None:
+        settings["cpus_per_job"] = 1
+    if settings["gpus_per_job"] is None:
+        settings["gpus_per_job"] = 1 if str(settings["device"]).startswith("cuda") else 0
+    if settings["cpus_per_job"] <= 0:
+        raise ValueError(f"--cpus-per-job must be more than 0, got {settings['cpus_per_job']}")
+    if str(settings["device"]).startswith("cuda") and settings["gpus_per_job"] == 0:
+        raise ValueError(
+            f"--device {settings['device']} needs --gpus-per-job above 0 with --executor ray: a Ray task that reserves "
+            "no GPU sees none (use --device cpu or auto to train on CPUs)"
+        )
+
+
+def executor_options(settings: dict[str, Any]) -> dict[str, Any]:
+    """Constructor arguments of the settings' executor.
+
+    :param settings: from ``resolve_settings``.
+    :return: ``jobs`` for the local executor; address and per-run resources for Ray, whose local instance gets
+        CPUs for ``jobs`` runs at once.
+    """
+    if settings["executor"] != "ray":
+        return {"jobs": settings["jobs"]}
+    cpus = settings["cpus_per_job"]
+    return {
+        "address": settings["address"],
+        "num_cpus_per_job": cpus,
+        "num_gpus_per_job": settings["gpus_per_job"],
+        "local_num_cpus": None if settings["address"] is not None else max(math.ceil(settings["jobs"] * cpus), 1),
+    }
 
 
 def _is_positive_int(value: Any) -> bool:
@@ -321,11 +406,11 @@ def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0
             eval_episodes=settings["eval_episodes"],
             hyperparams=dict(settings["hyperparams"].get(agent, {})),
             env_kwargs=dict(settings["env_kwargs"]),
-            eval_env_kwargs=dict(settings["eval_env_kwargs"]),
+            eval_env_kwargs=evaluation_kwargs(env_id, settings),
             device=settings["device"],
             out_dir=settings["out"],
             verbose=verbose,
-            progress_bar=progress and settings["jobs"] == 1,
+            progress_bar=progress and settings["jobs"] == 1 and settings.get("executor", "local") == "local",
         )
         for env_id in settings["env_ids"]
         for agent in settings["agents"]
@@ -333,7 +418,20 @@ def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0
     ]
 
 
-def _anchors_for(jobs: Sequence[Job], env_kwargs: dict[str, Any]) -> dict[str, Any]:
+def evaluation_kwargs(env_id: str, settings: dict[str, Any]) -> dict[str, Any]:
+    """Keyword arguments of the evaluation env: the paper's evaluation configuration of ``env_id``
+    (``envs.PAPER_EVAL_KWARGS``), then ``--env-kwargs``, then ``--eval-env-kwargs`` (later ones win).
+
+    :param env_id: the registered id.
+    :param settings: the merged CLI settings.
+    :return: the kwargs.
+    """
+    from envs import PAPER_EVAL_KWARGS
+
+    return {**PAPER_EVAL_KWARGS.get(env_id, {}), **settings["env_kwargs"], **settings["eval_env_kwargs"]}
+
+
+def _anchors_for(jobs: Sequence[Job]) -> dict[str, Any]:
     from eval.anchors import compute_anchors
 
     anchors: dict[str, Any] = {}
@@ -341,7 +439,7 @@ def _anchors_for(jobs: Sequence[Job], env_kwargs: dict[str, Any]) -> dict[str, A
         if job.env_short in anchors:
             continue
         try:
-            anchors[job.env_short] = compute_anchors(job.env_id, env_kwargs)
+            anchors[job.env_short] = compute_anchors(job.env_id, job.eval_env_kwargs)
         except Exception as error:  # the anchors are context; their failure must not cost the sweep
             print(f"ebm-eval: no anchors for {job.env_id}: {error}", file=sys.stderr)
             anchors[job.env_short] = None
@@ -358,7 +456,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         settings = resolve_settings(args)
-        executor = executor_from_name(settings["executor"], jobs=settings["jobs"])
+        executor = executor_from_name(settings["executor"], **executor_options(settings))
     except (ValueError, TypeError) as error:
         parser.error(str(error))  # exits 2, like any bad flag
 
@@ -378,7 +476,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{settings['seeds']}, {settings['timesteps']} transitions each, into {out}/",
         file=sys.stderr,
     )
-    anchors = _anchors_for(jobs, settings["eval_env_kwargs"])  # anchors of the env the scores come from
+    anchors = _anchors_for(jobs)  # anchors of the env the scores come from
     (out / "anchors.json").write_text(json.dumps({env: a and asdict(a) for env, a in anchors.items()}, indent=2))
 
     results = executor.map(jobs, progress=progress)

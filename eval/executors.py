@@ -1,8 +1,9 @@
 """Executors run a list of independent jobs and return their results in the same order.
 
 ``LocalExecutor`` uses a process pool on this machine. A distributed engine plugs in behind the same
-``Executor`` protocol (``executor_from_name("ray")`` imports ``eval.ray_executor`` lazily, a later module):
-it only has to ship a picklable ``Job`` to ``run_job`` and bring the picklable ``JobResult`` back.
+``Executor`` protocol: it only has to ship a picklable ``Job`` to ``run_job`` and bring the picklable
+``JobResult`` back. ``executor_from_name("ray")`` imports ``eval.ray_executor.RayExecutor`` (Ray tasks, the
+``ray`` extra) lazily, so that nothing else imports Ray.
 """
 
 from __future__ import annotations
@@ -111,8 +112,9 @@ EXECUTORS = ("local", "ray")
 def executor_from_name(name: str, **kwargs: Any) -> Executor:
     """Build an executor by name.
 
-    :param name: "local" (process pool on this machine) or "ray" (needs the ``ray`` extra and ``eval.ray_executor``).
-    :param kwargs: constructor arguments of the executor (e.g. ``jobs=4``).
+    :param name: "local" (process pool on this machine) or "ray" (Ray tasks; needs the ``ray`` extra).
+    :param kwargs: constructor arguments of the executor (e.g. ``jobs=4`` for local; ``address="auto"``,
+        ``num_cpus_per_job=1``, ``num_gpus_per_job=0`` for ray, see ``eval.ray_executor.RayExecutor``).
     :return: the executor.
     """
     if name == "local":

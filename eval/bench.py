@@ -1,0 +1,401 @@
+"""Planner and training speed: ``python -m eval.bench`` (``make bench``).
+
+Prints markdown tables, all measured in the same run so that the ratios compare like with like on a loaded machine:
+
+1. **Plan time**: ms per ``MPPIPlanner.plan`` (one env) over a grid of state dims D, candidates K, horizons T and
+   iterations I, in float32 and with ``autocast="bf16"``, next to ``pytorch_mppi.MPPI`` on the equivalent problem
+   and the ratio. The variants are timed interleaved, repeat by repeat, and the table shows medians.
+2. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
+3. **learn throughput**: transitions per second and peak memory of ``EBMPlannerAgent.learn`` and SB3 ``PPO.learn``
+   on ``ebm/Particle-v0``, each in its own subprocess.
+
+What is timed for pytorch-mppi (0.9): ``MPPI.command(state, shift_nominal_trajectory=False)`` is one MPPI
+iteration (sample K x T action noise, roll out T sequential calls of the learned dynamics on [K, D + D], add the
+running costs, re-weight), so one plan is I such calls on a controller made beforehand. Its dynamics is
+``s' = s + MLP(concat(s, a))`` with the same 3 x 128 LeakyReLU MLP as our energy (input 2D, output D instead of 1),
+actions of dim D, the running cost a quadratic ``|s' - g|^2 + 0.1 |a|^2``; both run under ``torch.inference_mode``.
+Ours scores the K x T transitions of a state plan with the energy in one batched call instead of T sequential ones.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import importlib.metadata
+import json
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from ebm_agent.costs import GaussianGoalEnergy, PlanCost
+from ebm_agent.energy import EnergyModel
+from ebm_agent.mppi import MPPIConfig, MPPIPlanner
+from ebm_agent.networks import build_mlp
+
+__all__ = ["PlanTiming", "bench_learn", "bench_plan", "main", "pytorch_mppi_version"]
+
+FULL_GRID = {"state_dims": (2, 4, 20), "samples": (64, 256, 1024), "horizons": (20, 80), "iterations": (10, 80)}
+QUICK_GRID = {"state_dims": (2, 20), "samples": (64, 1024), "horizons": (20, 80), "iterations": (10,)}
+DEFAULT_CASE = (2, 80, 10, 80)
+"""The agent's own setting (D=2 particle, K=80, T=10, 80 iterations), always measured."""
+COMPILE_CASE = (2, 256, 20, 10)
+ENV_ID = "ebm/Particle-v0"
+
+
+@dataclass
+class PlanTiming:
+    """
+    Median milliseconds per plan of each variant for one problem size.
+
+    :param device: where it ran.
+    :param state_dim: D.
+    :param num_samples: K.
+    :param horizon: T.
+    :param iterations: I.
+    :param ours_ms: our planner in float32.
+    :param ours_bf16_ms: our planner with ``autocast="bf16"``.
+    :param theirs_ms: pytorch-mppi, or None when it is not installed.
+    """
+
+    device: str
+    state_dim: int
+    num_samples: int
+    horizon: int
+    iterations: int
+    ours_ms: float
+    ours_bf16_ms: float
+    theirs_ms: float | None
+
+
+def pytorch_mppi_version() -> str | None:
+    """
+    The installed pytorch-mppi version.
+
+    :return: its version string, or None when the ``bench`` extra is not installed.
+    """
+    try:
+        import pytorch_mppi  # noqa: F401
+    except ImportError:
+        return None
+    return importlib.metadata.version("pytorch-mppi")
+
+
+def _timed(fn: Callable[[], object], device: torch.device) -> float:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    begin = time.perf_counter()
+    fn()
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+    return 1000.0 * (time.perf_counter() - begin)
+
+
+def _ours(state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, **options: object):
+    torch.manual_seed(0)
+    energy = EnergyModel(state_dim).to(device)  # the paper's 3 x 128 LeakyReLU MLP
+    cost = PlanCost(energy, GaussianGoalEnergy(tuple(range(state_dim))))
+    config = MPPIConfig(horizon=horizon, num_samples=samples, iterations=iterations, **options)  # type: ignore[arg-type]
+    planner = MPPIPlanner(config, state_dim, state_low=-torch.ones(state_dim), state_high=torch.ones(state_dim), device=device)
+    start = torch.zeros(1, state_dim, device=device)
+    goals = torch.full((1, state_dim), 0.5, device=device)
+    generator = torch.Generator(device=device).manual_seed(0)
+    return lambda: planner.plan(start, goals, cost, generator=generator)
+
+
+class _Dynamics(nn.Module):
+    """s' = s + MLP(concat(s, a)), the MLP the same size as our energy."""
+
+    def __init__(self, state_dim: int) -> None:
+        super().__init__()
+        self.net = build_mlp(2 * state_dim, state_dim, hidden_dim=128, num_hidden_layers=3, activation="leaky_relu")
+
+    def forward(self, states: Tensor, actions: Tensor) -> Tensor:
+        return states + self.net(torch.cat([states, actions], dim=-1))
+
+
+def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device):
+    from pytorch_mppi import MPPI
+
+    torch.manual_seed(0)
+    dynamics = _Dynamics(state_dim).to(device)
+    goal = torch.full((state_dim,), 0.5, device=device)
+
+    def running_cost(states: Tensor, actions: Tensor) -> Tensor:
+        return (states - goal).square().sum(-1) + 0.1 * actions.square().sum(-1)
+
+    controller = MPPI(
+        dynamics,
+        running_cost,
+        nx=state_dim,
+        noise_sigma=0.1 * torch.eye(state_dim, device=device),
+        num_samples=samples,
+        horizon=horizon,
+        device=device,
+        lambda_=1e-2,
+        u_min=-torch.ones(state_dim, device=device),
+        u_max=torch.ones(state_dim, device=device),
+    )
+    state = torch.zeros(state_dim, device=device)
+
+    def plan() -> None:
+        with torch.inference_mode():
+            for _ in range(iterations):  # one MPPI iteration per command() without shifting the nominal plan
+                controller.command(state, shift_nominal_trajectory=False)
+
+    return plan
+
+
+def bench_plan(
+    state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, repeats: int, compare: bool
+) -> PlanTiming:
+    """
+    Time one problem size: ours (float32 and bf16 autocast) and pytorch-mppi, interleaved, after one warm-up each.
+
+    :param state_dim: D.
+    :param samples: K.
+    :param horizon: T.
+    :param iterations: I.
+    :param device: the device to plan on.
+    :param repeats: timed plans per variant; the median is kept.
+    :param compare: also time pytorch-mppi.
+    :return: the median times.
+    """
+    variants = {
+        "ours": _ours(state_dim, samples, horizon, iterations, device),
+        "bf16": _ours(state_dim, samples, horizon, iterations, device, autocast="bf16"),
+    }
+    if compare:
+        variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device)
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    for fn in variants.values():
+        fn()  # warm-up: first-call allocations and kernel selection
+    for _ in range(repeats):
+        for name, fn in variants.items():
+            times[name].append(_timed(fn, device))
+    medians = {name: statistics.median(values) for name, values in times.items()}
+    return PlanTiming(
+        str(device), state_dim, samples, horizon, iterations, medians["ours"], medians["bf16"], medians.get("theirs")
+    )
+
+
+def bench_compile(device: torch.device, repeats: int) -> dict[str, float]:
+    """
+    The compile option at ``COMPILE_CASE``: first plan (with compilation) and the median of later plans vs eager.
+
+    :param device: the device to plan on.
+    :param repeats: timed plans per variant.
+    :return: {"first_ms", "compiled_ms", "eager_ms"}.
+    """
+    eager = _ours(*COMPILE_CASE, device)
+    compiled = _ours(*COMPILE_CASE, device, compile=True)
+    first = _timed(compiled, device)
+    eager()
+    times: dict[str, list[float]] = {"compiled_ms": [], "eager_ms": []}
+    for _ in range(repeats):
+        times["compiled_ms"].append(_timed(compiled, device))
+        times["eager_ms"].append(_timed(eager, device))
+    return {"first_ms": first, **{name: statistics.median(values) for name, values in times.items()}}
+
+
+def learn_worker(agent: str, steps: int, threads: int) -> dict[str, float]:
+    """
+    Run one ``learn`` in this process and measure it (called in a subprocess by :func:`bench_learn`).
+
+    :param agent: ``"ebm"`` or ``"ppo"``.
+    :param steps: total_timesteps passed to ``learn``.
+    :param threads: torch CPU threads.
+    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb"}.
+    """
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers ebm/Particle-v0)
+
+    torch.set_num_threads(threads)
+    env = gym.make(ENV_ID)
+    model: Any
+    if agent == "ebm":
+        from ebm_agent import EBMPlannerAgent
+
+        model = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu")
+    elif agent == "ppo":
+        from stable_baselines3 import PPO
+
+        model = PPO("MultiInputPolicy", env, seed=0, device="cpu")
+    else:
+        raise ValueError(f"agent must be 'ebm' or 'ppo', got {agent!r}.")
+    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+    begin = time.perf_counter()
+    model.learn(steps)
+    seconds = time.perf_counter() - begin
+    rss_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    return {"seconds": seconds, "timesteps": float(model.num_timesteps), "rss_before_mb": rss_before, "rss_peak_mb": rss_peak}
+
+
+def bench_learn(steps: int, threads: int) -> dict[str, dict[str, float]]:
+    """
+    ``learn(steps)`` of the EBM agent and of PPO, each in a fresh subprocess so that peak memory is its own.
+
+    :param steps: total_timesteps of each.
+    :param threads: torch CPU threads of each.
+    :return: per agent, what :func:`learn_worker` measured.
+    """
+    results = {}
+    for agent in ("ebm", "ppo"):
+        command = [sys.executable, "-m", "eval.bench", "--learn-worker", agent, "--learn-steps", str(steps)]
+        command += ["--threads", str(threads)]
+        done = subprocess.run(command, capture_output=True, text=True, check=False)
+        if done.returncode != 0:
+            raise RuntimeError(f"the {agent} learn worker failed:\n{done.stderr[-3000:]}")
+        results[agent] = json.loads(done.stdout.strip().splitlines()[-1])
+    return results
+
+
+def _machine() -> str:
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo") as cpuinfo:
+            model = next(line.split(":", 1)[1].strip() for line in cpuinfo if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    load = ", ".join(f"{value:.1f}" for value in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return f"{model}, {cores} cores available, load average {load} at the start"
+
+
+def _plan_table(rows: Sequence[PlanTiming], compare: bool) -> list[str]:
+    header = (
+        "| device | D | K | T | iters | ours fp32 ms | ours bf16 ms | pytorch-mppi ms | theirs / ours | theirs / ours bf16 |"
+    )
+    lines = [header, "|---" * (header.count("|") - 1) + "|"]
+    for row in rows:
+        theirs = "n/a" if row.theirs_ms is None else f"{row.theirs_ms:.1f}"
+        ratio = "n/a" if row.theirs_ms is None else f"{row.theirs_ms / row.ours_ms:.2f}x"
+        ratio_bf16 = "n/a" if row.theirs_ms is None else f"{row.theirs_ms / row.ours_bf16_ms:.2f}x"
+        lines.append(
+            f"| {row.device} | {row.state_dim} | {row.num_samples} | {row.horizon} | {row.iterations} | "
+            f"{row.ours_ms:.1f} | {row.ours_bf16_ms:.1f} | {theirs} | {ratio} | {ratio_bf16} |"
+        )
+    if not compare:
+        lines.append("")
+        lines.append("pytorch-mppi is not installed (`pip install -e .[bench]`), so its columns are n/a.")
+    return lines
+
+
+def _learn_table(results: dict[str, dict[str, float]], steps: int) -> list[str]:
+    lines = [
+        "| agent | learn(total_timesteps) | transitions run | seconds | transitions / s | 50k extrapolated (min) | "
+        "RSS before learn (MB) | peak RSS (MB) |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for agent, label in (("ebm", "EBMPlannerAgent"), ("ppo", "PPO")):
+        result = results[agent]
+        rate = result["timesteps"] / result["seconds"]
+        lines.append(
+            f"| {label} | {steps} | {int(result['timesteps'])} | {result['seconds']:.1f} | {rate:.1f} | "
+            f"{50_000 / rate / 60:.1f} | {result['rss_before_mb']:.0f} | {result['rss_peak_mb']:.0f} |"
+        )
+    ebm_rate = results["ebm"]["timesteps"] / results["ebm"]["seconds"]
+    ppo_rate = results["ppo"]["timesteps"] / results["ppo"]["seconds"]
+    lines += ["", f"PPO / EBM throughput ratio in this run: {ppo_rate / ebm_rate:.1f}x."]
+    return lines
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """
+    Run the benchmark and print (and optionally write) the markdown report.
+
+    :param argv: command-line arguments (``--help`` lists them); None for ``sys.argv``.
+    """
+    parser = argparse.ArgumentParser(prog="python -m eval.bench", description=__doc__.splitlines()[0])
+    parser.add_argument("--quick", action="store_true", help="a small grid: D {2, 20}, K {64, 1024}, T {20, 80}, I {10}")
+    parser.add_argument("--out", default=None, help="also write the report to this markdown file")
+    parser.add_argument("--repeats", type=int, default=5, help="timed plans per variant (median reported)")
+    parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
+    parser.add_argument("--learn-steps", type=int, default=1000, help="total_timesteps of each learn() (0 skips)")
+    parser.add_argument("--no-compile", action="store_true", help="skip the torch.compile section")
+    parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
+    args = parser.parse_args(argv)
+    if args.learn_worker:
+        print(json.dumps(learn_worker(args.learn_worker, args.learn_steps, args.threads)))
+        return
+    if args.repeats < 1:
+        parser.error("--repeats must be >= 1")
+
+    torch.set_num_threads(args.threads)
+    theirs_version = pytorch_mppi_version()
+    compare = theirs_version is not None
+    devices = [torch.device("cpu")] + ([torch.device("cuda")] if torch.cuda.is_available() else [])
+    grid = QUICK_GRID if args.quick else FULL_GRID
+    cases = [DEFAULT_CASE] + [
+        (d, k, t, i) for d in grid["state_dims"] for k in grid["samples"] for t in grid["horizons"] for i in grid["iterations"]
+    ]
+    command = "python -m eval.bench " + " ".join(sys.argv[1:] if argv is None else argv)
+    report = [
+        "# Benchmarks",
+        "",
+        f"- Command: `{command.strip()}`",
+        f"- Date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
+        f"- Machine: {_machine()}; torch threads: {args.threads}",
+        f"- torch {torch.__version__}; pytorch-mppi {theirs_version or 'not installed'}; Python {platform.python_version()}",
+        f"- CUDA: {torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'not available (CPU rows only)'}",
+        f"- Grid: {'quick' if args.quick else 'full'}; medians of {args.repeats} plans per variant after one warm-up, "
+        "variants interleaved; one env (N=1).",
+        "",
+        "## Plan time (ms per plan)",
+        "",
+    ]
+    print("\n".join(report), flush=True)
+    rows = []
+    for device in devices:
+        for case in cases:
+            row = bench_plan(*case, device=device, repeats=args.repeats, compare=compare)
+            rows.append(row)
+            print(_plan_table([row], True)[-1], flush=True)
+    report += _plan_table(rows, compare)
+    report += [
+        "",
+        "What is timed: see the docstring of `eval/bench.py`. `theirs / ours` > 1 means our planner is faster; only ratios",
+        "from the same run are comparable (timings on the shared machines vary by 30-40% between runs).",
+    ]
+    if not args.no_compile:
+        timings = bench_compile(devices[0], args.repeats)
+        report += [
+            "",
+            f"## torch.compile (D, K, T, I = {COMPILE_CASE}, {devices[0]})",
+            "",
+            "| first plan incl. compilation (s) | compiled median ms | eager median ms | eager / compiled |",
+            "|---|---|---|---|",
+            f"| {timings['first_ms'] / 1000:.1f} | {timings['compiled_ms']:.1f} | {timings['eager_ms']:.1f} | "
+            f"{timings['eager_ms'] / timings['compiled_ms']:.2f}x |",
+        ]
+    if args.learn_steps > 0:
+        results = bench_learn(args.learn_steps, args.threads)
+        report += ["", f"## learn throughput ({ENV_ID}, CPU, {args.threads} threads, one process each)", ""]
+        report += _learn_table(results, args.learn_steps)
+        report += [
+            "",
+            "PPO collects whole rollouts of n_steps=2048, so it runs at least 2048 transitions whatever total_timesteps.",
+            "The 50k column extrapolates linearly from the measured transitions/s (startup excluded); the EBM agent's cost",
+            "per transition changes as its plans improve and its adaptive iteration count grows, so it is an estimate.",
+            "Peak RSS is `ru_maxrss` of the worker process (it includes the interpreter, torch and the env).",
+        ]
+    text = "\n".join(report) + "\n"
+    print("\n".join(report[report.index("## Plan time (ms per plan)") :]))
+    if args.out:
+        os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+        with open(args.out, "w") as handle:
+            handle.write(text)
+
+
+if __name__ == "__main__":
+    main()
