@@ -51,6 +51,7 @@ class ForwardDynamicsModel(nn.Module):
         )
         keep = torch.ones(state_dim)
         keep[list(masked_dims)] = 0.0
+        self.keep: Tensor
         self.register_buffer("keep", keep)  # [D] 1 for modelled dims, 0 for target dims
 
     def forward(self, states: Tensor, actions: Tensor) -> Tensor:
@@ -133,6 +134,13 @@ class ActionFFAgent(PlannerAgentBase):
         if _init_setup_model:
             self._setup_model()
 
+    @property
+    def dynamics_model(self) -> ForwardDynamicsModel:
+        """The learned forward model f(s, a) -> s'."""
+        model = self.policy.network("dynamics")
+        assert isinstance(model, ForwardDynamicsModel)
+        return model
+
     def _build_model(self) -> None:
         spec = self.goal_spec
         assert spec is not None
@@ -162,7 +170,7 @@ class ActionFFAgent(PlannerAgentBase):
         self.policy.set_training_mode(False)
         start = torch.as_tensor(states, device=self.device)  # [n, D]
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
-        predicted, actions, distance = self.planner.plan(self.policy.dynamics, start, goal, generator)
+        predicted, actions, distance = self.planner.plan(self.dynamics_model, start, goal, generator)
         return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
 
     def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
@@ -175,7 +183,7 @@ class ActionFFAgent(PlannerAgentBase):
         :raises FloatingPointError: on a non-finite loss (no update applied).
         """
         self.policy.set_training_mode(True)
-        model = self.policy.dynamics
+        model = self.dynamics_model
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         predicted = model(as_tensor(states), as_tensor(actions))  # [B, D]
         loss = ((predicted - as_tensor(next_states)) ** 2).mean()

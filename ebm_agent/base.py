@@ -17,6 +17,7 @@ import torch
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import configure_logger, safe_mean
 
@@ -71,7 +72,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     :param _init_setup_model: build the networks now (``load`` passes False).
     """
 
-    policy_aliases: ClassVar[dict[str, type[PlanningPolicy]]] = {"MultiInputPolicy": PlanningPolicy}
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = {"MultiInputPolicy": PlanningPolicy}
     default_tb_log_name: ClassVar[str] = "Planner"
     policy: PlanningPolicy
 
@@ -260,7 +261,13 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """
         spec = self.goal_spec
         assert spec is not None
-        gap = np.abs(real - planned)[:, spec.model_dims]
+        gap = np.abs(real - planned)  # [N, D]
+        if spec.goal_period is not None:
+            # Periodic goal dims (Reacher's normalised angles) are compared the short way round the circle:
+            # a state that wraps from 0.99 to -0.99 has moved by 0.02, not 1.98.
+            wrapped = np.mod(gap[:, spec.goal_indices], spec.goal_period)
+            gap[:, spec.goal_indices] = np.minimum(wrapped, spec.goal_period - wrapped)
+        gap = gap[:, spec.model_dims]
         return gap.max(axis=1) if reduce == "max" else gap.mean(axis=1)
 
     def _as_batch(self, observation: Any) -> tuple[dict[str, np.ndarray], bool]:
@@ -456,7 +463,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             actions = self._actions(states, plans, planned_actions, steps)
             new_obs, rewards, dones, infos = env.step(actions)
             self.num_timesteps += n
-            real_next = np.asarray(new_obs["observation"], dtype=np.float32).copy()  # type: ignore[index]
+            real_next = np.asarray(new_obs["observation"], dtype=np.float32).copy()  # type: ignore[call-overload,index]
             for i in np.where(dones)[0]:
                 # The VecEnv already reset this env: the true last state is in terminal_observation, never the
                 # next episode's first state (that pair would teach the model a teleport).

@@ -109,7 +109,7 @@ def read_goal_spec(env: VecEnv) -> GoalSpec:
     :return: the spec.
     """
     check_spaces(env.observation_space, env.action_space)
-    obs_space = env.observation_space.spaces  # type: ignore[union-attr]
+    obs_space = env.observation_space.spaces  # type: ignore[attr-defined]
     state_dim = int(obs_space["observation"].shape[0])
     goal_dim = int(obs_space["desired_goal"].shape[0])
     action_space = env.action_space
@@ -124,7 +124,7 @@ def read_goal_spec(env: VecEnv) -> GoalSpec:
     goal_indices = attr("goal_indices", None)
     if goal_indices is None:
         obs = env.reset()
-        goal_indices = infer_goal_indices(obs["observation"], obs["achieved_goal"])  # type: ignore[index]
+        goal_indices = infer_goal_indices(obs["observation"], obs["achieved_goal"])  # type: ignore[call-overload,index]
     low = attr("state_low", None)
     high = attr("state_high", None)
     if low is None and high is None:

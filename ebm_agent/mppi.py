@@ -17,6 +17,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from ebm_agent.config import check_field_types
 from ebm_agent.costs import PlanCost
 from ebm_agent.planner import PlanResult, as_bounds, clip_states, initial_plan, validate_plan_inputs
 from ebm_agent.stomp import StompNoise
@@ -80,6 +81,7 @@ class MPPIConfig:
     autocast: str | None = None
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         for name in ("horizon", "num_samples"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:

@@ -46,7 +46,17 @@ class PlanningPolicy(BasePolicy):
             self.add_module(name, module)
         names = self.network_names if trained is None else trained
         params = [p for name in names for p in getattr(self, name).parameters()]
-        self.optimizer = ClippedAdam(params, lr=learning_rate, betas=betas, clip_sigma=clip_sigma) if params else None
+        self.optimizer = ClippedAdam(params, lr=learning_rate, betas=betas, clip_sigma=clip_sigma) if params else None  # type: ignore[assignment]
+
+    def network(self, name: str) -> nn.Module:
+        """The network registered under ``name``.
+
+        :param name: e.g. ``"energy"`` or ``"dynamics"``.
+        :return: the module.
+        """
+        module = getattr(self, name)
+        assert isinstance(module, nn.Module)
+        return module
 
     def _predict(self, observation: Any, deterministic: bool = False) -> torch.Tensor:
         raise NotImplementedError(

@@ -43,7 +43,9 @@ KNOWN_OPTIMA: tuple[KnownOptimum, ...] = (
     # Value iteration on a 0.01 lattice with moves up to 0.05 per axis through the final maze layout, computed by
     # envs.maze.maze_optimal_score(): -73.67 in 54 steps under the strict y > 0.25 / y < -0.25 wall rule (the -71.9
     # of original_code.md §6 counted y = 0.25 as free through a float artefact; see docs/environments.md).
-    KnownOptimum("ebm/Maze-v0", (-0.85, -0.85), (0.7, -0.8), -73.67, "envs.maze.maze_optimal_score() (0.01 lattice, 54 steps)"),
+    KnownOptimum(
+        "ebm/Maze-v0", (-0.85, -0.85), (0.7, -0.8), -73.67, "envs.maze.maze_optimal_score() (0.01 lattice, 54 steps)"
+    ),
 )
 """Optima of the paper's evaluation configurations; Reacher and Sawyer have none (Sawyer: see standing still)."""
 

@@ -26,6 +26,7 @@ import json
 import os
 import platform
 import resource
+import shlex
 import statistics
 import subprocess
 import sys
@@ -233,12 +234,22 @@ def learn_worker(agent: str, steps: int, threads: int) -> dict[str, float]:
         model = PPO("MultiInputPolicy", env, seed=0, device="cpu")
     else:
         raise ValueError(f"agent must be 'ebm' or 'ppo', got {agent!r}.")
-    rss_before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # Linux reports KiB
+    rss_before = _peak_rss_mb()
     begin = time.perf_counter()
     model.learn(steps)
     seconds = time.perf_counter() - begin
-    rss_peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    rss_peak = _peak_rss_mb()
     return {"seconds": seconds, "timesteps": float(model.num_timesteps), "rss_before_mb": rss_before, "rss_peak_mb": rss_peak}
+
+
+def _peak_rss_mb() -> float:
+    # VmHWM is this process's own high-water mark; ru_maxrss of a forked-and-exec'd child starts at the parent's
+    # peak on Linux, which would hide the worker's own.
+    try:
+        with open("/proc/self/status") as status:
+            return next(float(line.split()[1]) / 1024.0 for line in status if line.startswith("VmHWM:"))
+    except (OSError, StopIteration):
+        return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
 def bench_learn(steps: int, threads: int) -> dict[str, dict[str, float]]:
@@ -294,7 +305,7 @@ def _plan_table(rows: Sequence[PlanTiming], compare: bool) -> list[str]:
 def _learn_table(results: dict[str, dict[str, float]], steps: int) -> list[str]:
     lines = [
         "| agent | learn(total_timesteps) | transitions run | seconds | transitions / s | 50k extrapolated (min) | "
-        "RSS before learn (MB) | peak RSS (MB) |",
+        "peak RSS before learn (MB) | peak RSS (MB) |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for agent, label in (("ebm", "EBMPlannerAgent"), ("ppo", "PPO")):
@@ -323,6 +334,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     parser.add_argument("--learn-steps", type=int, default=1000, help="total_timesteps of each learn() (0 skips)")
     parser.add_argument("--no-compile", action="store_true", help="skip the torch.compile section")
+    parser.add_argument("--note", action="append", default=[], help="a line to add to the report's header")
     parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.learn_worker:
@@ -339,7 +351,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     cases = [DEFAULT_CASE] + [
         (d, k, t, i) for d in grid["state_dims"] for k in grid["samples"] for t in grid["horizons"] for i in grid["iterations"]
     ]
-    command = "python -m eval.bench " + " ".join(sys.argv[1:] if argv is None else argv)
+    command = shlex.join(["python", "-m", "eval.bench", *(sys.argv[1:] if argv is None else argv)])
     report = [
         "# Benchmarks",
         "",
@@ -350,6 +362,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"- CUDA: {torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'not available (CPU rows only)'}",
         f"- Grid: {'quick' if args.quick else 'full'}; medians of {args.repeats} plans per variant after one warm-up, "
         "variants interleaved; one env (N=1).",
+        *(f"- Note: {note}" for note in args.note),
         "",
         "## Plan time (ms per plan)",
         "",
@@ -387,7 +400,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             "PPO collects whole rollouts of n_steps=2048, so it runs at least 2048 transitions whatever total_timesteps.",
             "The 50k column extrapolates linearly from the measured transitions/s (startup excluded); the EBM agent's cost",
             "per transition changes as its plans improve and its adaptive iteration count grows, so it is an estimate.",
-            "Peak RSS is `ru_maxrss` of the worker process (it includes the interpreter, torch and the env).",
+            "Peak RSS is the worker process's VmHWM (it includes the interpreter, torch and the env), before and after learn.",
         ]
     text = "\n".join(report) + "\n"
     print("\n".join(report[report.index("## Plan time (ms per plan)") :]))

@@ -99,7 +99,7 @@ def test_save_load_gives_identical_deterministic_predict(agent_class, tmp_path):
     agent = make_agent(agent_class, env)
     agent.learn(60)
     obs, _ = env.reset(seed=3)
-    action, state = agent.predict(obs, deterministic=True)
+    action, _state = agent.predict(obs, deterministic=True)
     again, _ = agent.predict(obs, deterministic=True)
     np.testing.assert_array_equal(action, again)
     assert action.shape == env.action_space.shape
@@ -150,7 +150,7 @@ def test_evaluate_policy_and_sb3_callbacks(agent_class, tmp_path):
     data = np.load(tmp_path / "evaluations.npz")
     assert list(data["timesteps"]) == [40, 80]
     assert sorted(os.listdir(tmp_path / "ckpt")) == ["rl_model_40_steps.zip", "rl_model_80_steps.zip"]
-    rewards, lengths = evaluate_policy(agent, eval_env, n_eval_episodes=2, return_episode_rewards=True)
+    rewards, _lengths = evaluate_policy(agent, eval_env, n_eval_episodes=2, return_episode_rewards=True)
     assert len(rewards) == 2 and all(np.isfinite(rewards))
 
 
@@ -197,7 +197,9 @@ class NoGoalEnv(gym.Env):
 class DiscreteGoalEnv(NoGoalEnv):
     """A goal env with Discrete actions."""
 
-    observation_space = spaces.Dict({k: spaces.Box(-1, 1, (2,), np.float32) for k in ("observation", "achieved_goal", "desired_goal")})
+    observation_space = spaces.Dict(
+        {k: spaces.Box(-1, 1, (2,), np.float32) for k in ("observation", "achieved_goal", "desired_goal")}
+    )
     action_space = spaces.Discrete(4)
 
 

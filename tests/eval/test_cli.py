@@ -53,7 +53,7 @@ def test_defaults_of_ebm_eval_baseline_ppo():
     settings = settings_of("--baseline", "ppo")
     assert settings["agents"] == ["ebm", "ppo"]
     assert settings["env_ids"] == ["ebm/Particle-v0"]
-    assert settings["timesteps"] == 5000 and settings["eval_freq"] == 1000
+    assert settings["timesteps"] == 2000 and settings["eval_freq"] == 400
     assert settings["seeds"] == [0] and settings["eval_episodes"] == 10 and settings["jobs"] == 1
     assert settings["out"].startswith("runs/ebm-eval-")
 
@@ -99,7 +99,7 @@ def test_preset_merges_under_explicit_flags(tmp_path):
     assert settings["env_ids"] == ["ebm/Maze-v0"] and settings["agents"] == ["ebm", "random"]
     assert settings["seeds"] == [1, 2]
     assert settings["hyperparams"] == {"ebm": {"horizon": 30, "width": 64}}
-    assert settings["eval_freq"] == 1000  # default timesteps 5000 // 5
+    assert settings["eval_freq"] == 400  # default timesteps 2000 // 5
 
 
 def test_every_bundled_preset_is_valid():
@@ -222,7 +222,8 @@ def test_sweep_run_folders_npz_and_tensorboard(sweep, agent):
     for name in ("config.yaml", "metrics.json", "model.zip"):
         assert (run_dir / name).is_file()
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
-    assert config["env_kwargs"] == {} and config["eval_env_kwargs"] == {"start": [0, 0]}
+    # The paper's particle evaluation (envs.PAPER_EVAL_KWARGS) under the --eval-env-kwargs flag.
+    assert config["env_kwargs"] == {} and config["eval_env_kwargs"] == {"start": [0, 0], "goal": [0.5, 0.5]}
     with np.load(run_dir / "evaluations.npz") as data:
         assert {"timesteps", "results", "ep_lengths"} <= set(data.files)
         np.testing.assert_array_equal(data["timesteps"], [100, 200])
