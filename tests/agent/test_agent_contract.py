@@ -223,3 +223,14 @@ def test_bad_spaces_and_inputs_give_clear_errors(agent_class):
         agent.predict(wrong)
     with pytest.raises(ValueError, match="total_timesteps"):
         agent.learn(-5)
+
+
+def test_tensorboard_plan_image_for_2d_states(tmp_path):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    kwargs = {**FAST_KWARGS[EBMPlannerAgent], "image_log_interval": 2}
+    agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=0, tensorboard_log=str(tmp_path), **kwargs)
+    agent.learn(40)
+    accumulator = EventAccumulator(glob.glob(str(tmp_path / "*"))[0])
+    accumulator.Reload()
+    assert "plan/energy_map" in accumulator.Tags()["images"]

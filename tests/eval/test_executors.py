@@ -66,12 +66,3 @@ def test_executor_from_name():
 def test_bad_worker_count_raises(jobs):
     with pytest.raises(ValueError, match="positive integer"):
         LocalExecutor(jobs=jobs)
-
-
-def test_ray_name_gives_a_clear_error_until_its_module_exists():
-    import importlib.util
-
-    if importlib.util.find_spec("eval.ray_executor") is not None:
-        pytest.skip("eval.ray_executor exists: its own tests cover it")
-    with pytest.raises(ValueError, match=r"the ray executor is not available .*--executor local"):
-        executor_from_name("ray", jobs=2)
