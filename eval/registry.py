@@ -6,6 +6,7 @@ without) every agent package, and a process-pool worker imports only the agent i
 
 from __future__ import annotations
 
+import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
@@ -77,59 +78,45 @@ def _training_env(env_id: str, env_kwargs: dict[str, Any], seed: int, hyperparam
     return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
 
 
-def make_ebm(
-    env_id: str,
-    env_kwargs: dict[str, Any],
-    seed: int,
-    tensorboard_log: str | None,
-    device: str,
-    hyperparams: dict[str, Any],
-    verbose: int = 0,
-) -> BaseAlgorithm:
-    """Build the EBM planning agent (single env unless ``n_envs`` is given). See ``AgentFactory``."""
-    from ebm_agent.agent import EBMPlannerAgent
+def _class_factory(module: str, class_name: str, description: str) -> AgentFactory:
+    """A factory for an agent class with the SB3 constructor ``Agent(policy, env, seed=..., ...)``.
 
-    env = _training_env(env_id, env_kwargs, seed, hyperparams)
-    policy = _policy_for(env_id, env_kwargs)
-    return EBMPlannerAgent(
-        policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
-    )
+    The class is imported when the factory runs, so importing ``eval`` never imports an agent package.
 
+    :param module: module holding the class.
+    :param class_name: the class.
+    :param description: the factory's docstring.
+    :return: the factory.
+    """
 
-def make_action_ff(
-    env_id: str,
-    env_kwargs: dict[str, Any],
-    seed: int,
-    tensorboard_log: str | None,
-    device: str,
-    hyperparams: dict[str, Any],
-    verbose: int = 0,
-) -> BaseAlgorithm:
-    """Build the action-conditioned feed-forward baseline (same API as the EBM agent). See ``AgentFactory``."""
-    from baselines import ActionFFAgent  # type: ignore[attr-defined]
+    def factory(
+        env_id: str,
+        env_kwargs: dict[str, Any],
+        seed: int,
+        tensorboard_log: str | None,
+        device: str,
+        hyperparams: dict[str, Any],
+        verbose: int = 0,
+    ) -> BaseAlgorithm:
+        agent_class = getattr(importlib.import_module(module), class_name)
+        env = _training_env(env_id, env_kwargs, seed, hyperparams)
+        policy = _policy_for(env_id, env_kwargs)
+        return agent_class(
+            policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
+        )
 
-    env = _training_env(env_id, env_kwargs, seed, hyperparams)
-    policy = _policy_for(env_id, env_kwargs)
-    return ActionFFAgent(
-        policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
-    )
+    factory.__doc__ = description
+    factory.__name__ = f"make_{class_name}"
+    return factory
 
 
-def make_random(
-    env_id: str,
-    env_kwargs: dict[str, Any],
-    seed: int,
-    tensorboard_log: str | None,
-    device: str,
-    hyperparams: dict[str, Any],
-    verbose: int = 0,
-) -> BaseAlgorithm:
-    """Build the uniform random-exploration agent. See ``AgentFactory``."""
-    from baselines.random_agent import RandomAgent
-
-    env = _training_env(env_id, env_kwargs, seed, hyperparams)
-    policy = _policy_for(env_id, env_kwargs)
-    return RandomAgent(policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams)
+make_ebm = _class_factory(
+    "ebm_agent.agent", "EBMPlannerAgent", "Build the EBM planning agent (single env unless ``n_envs`` is given)."
+)
+make_action_ff = _class_factory(
+    "baselines.action_ff", "ActionFFAgent", "Build the action-conditioned feed-forward baseline (same API as the EBM agent)."
+)
+make_random = _class_factory("baselines.random_agent", "RandomAgent", "Build the uniform random-exploration agent.")
 
 
 def make_ppo_agent(
