@@ -399,7 +399,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             "",
             "PPO collects whole rollouts of n_steps=2048, so it runs at least 2048 transitions whatever total_timesteps.",
             "The 50k column extrapolates linearly from the measured transitions/s (startup excluded); the EBM agent's cost",
-            "per transition changes as its plans improve and its adaptive iteration count grows, so it is an estimate.",
+            "per transition changes as its plans improve (longer plans mean fewer replans), so it is an estimate.",
             "Peak RSS is the worker process's VmHWM (it includes the interpreter, torch and the env), before and after learn.",
         ]
     text = "\n".join(report) + "\n"

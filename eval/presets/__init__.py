@@ -34,6 +34,9 @@ PRESET_KEYS = (
     "device",
     "jobs",
     "executor",
+    "address",
+    "cpus_per_job",
+    "gpus_per_job",
     "out",
 )
 """Keys a preset may set (dashes are read as underscores)."""
