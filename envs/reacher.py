@@ -20,6 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.mujoco_inverse import FrameSkipInverseDynamics
+from envs.torque_step import step_torques
 
 DEFAULT_GOAL = (0.7, 0.5)
 """The paper's Reacher goal in normalised joint angles (original code, ``train.py`` flags)."""
@@ -125,16 +126,7 @@ class ReacherEnv(gym.Env):
         :param action: [2] normalised torques; clipped to the action bounds (NaN/inf raise ValueError).
         :return: observation, reward, terminated, truncated (always False: TimeLimit truncates), info.
         """
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (2,):
-            raise ValueError(f"Reacher expects an action of shape (2,), got {action.shape}.")
-        if not np.all(np.isfinite(action)):
-            # MuJoCo would only warn and silently reset the simulation; a NaN action is a bug in the caller.
-            raise ValueError(
-                f"Reacher got a non-finite action {action.tolist()}; actions must be finite (they are clipped to [-1, 1])."
-            )
-        self.data.ctrl[:] = np.clip(action, -1.0, 1.0)
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        step_torques("Reacher", self.model, self.data, action, self.frame_skip)
         self.physics_steps += self.frame_skip
         obs = self._get_obs()
         info = self._info(obs)

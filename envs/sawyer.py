@@ -26,6 +26,7 @@ import numpy as np
 from gymnasium import spaces
 
 from envs.mujoco_inverse import FrameSkipInverseDynamics
+from envs.torque_step import step_torques
 
 TORQUE_LIMITS = np.array([80.0, 80.0, 40.0, 40.0, 9.0, 9.0, 9.0])
 """Peak joint torques of the real Sawyer (N m); action 1.0 is the full torque."""
@@ -144,16 +145,7 @@ class SawyerReachEnv(gym.Env):
         :param action: [7] normalised torques; clipped to [-1, 1] (NaN/inf raise ValueError).
         :return: observation, reward, terminated (always False), truncated (False: TimeLimit truncates), info.
         """
-        action = np.asarray(action, dtype=np.float64)
-        if action.shape != (7,):
-            raise ValueError(f"SawyerReach expects an action of shape (7,), got {action.shape}.")
-        if not np.all(np.isfinite(action)):
-            # MuJoCo would only warn and silently reset the simulation; a NaN action is a bug in the caller.
-            raise ValueError(
-                f"SawyerReach got a non-finite action {action.tolist()}; actions must be finite (they are clipped to [-1, 1])."
-            )
-        self.data.ctrl[:] = np.clip(action, -1.0, 1.0)
-        mujoco.mj_step(self.model, self.data, nstep=self.frame_skip)
+        step_torques("SawyerReach", self.model, self.data, action, self.frame_skip)
         self.physics_steps += self.frame_skip
         obs = self._get_obs()
         info = self._info(obs)
