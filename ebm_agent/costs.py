@@ -69,7 +69,16 @@ def wrap_difference(difference: Tensor, period: float | None) -> Tensor:
     return torch.remainder(difference + half, period) - half
 
 
-class GaussianGoalEnergy:
+class _GoalTerm:
+    """Shared settings of the goal energies that compare goal dims of plan states with the goal."""
+
+    def __init__(self, goal_indices: Sequence[int], weight: float = 1.0, period: float | None = None) -> None:
+        self.goal_indices = _check_indices(goal_indices, "goal_indices")
+        self.weight = float(weight)
+        self.period = _check_period(period)
+
+
+class GaussianGoalEnergy(_GoalTerm):
     """
     Gaussian goal around the final state (paper Eq. 6): weight * sum_g (s_T[goal_indices] - g)^2.
 
@@ -77,11 +86,6 @@ class GaussianGoalEnergy:
     :param weight: multiplier of the term.
     :param period: period of the goal coordinates (e.g. 2.0 for Reacher's normalised angles), or None.
     """
-
-    def __init__(self, goal_indices: Sequence[int], weight: float = 1.0, period: float | None = None) -> None:
-        self.goal_indices = _check_indices(goal_indices, "goal_indices")
-        self.weight = float(weight)
-        self.period = _check_period(period)
 
     def __call__(self, plans: Tensor, goals: Tensor) -> Tensor:
         """
@@ -95,7 +99,7 @@ class GaussianGoalEnergy:
         return self.weight * difference.square().sum(-1)
 
 
-class RampedGoalEnergy:
+class RampedGoalEnergy(_GoalTerm):
     """
     The original code's goal term: weight * mean_{t,g} ((t/T)^2 (s_t[goal_indices] - g))^2 over t = 0..T.
 
@@ -107,11 +111,6 @@ class RampedGoalEnergy:
     :param weight: multiplier of the term (the original's g_coeff: 1.0 in training, 10.0 in evaluation).
     :param period: period of the goal coordinates, or None.
     """
-
-    def __init__(self, goal_indices: Sequence[int], weight: float = 1.0, period: float | None = None) -> None:
-        self.goal_indices = _check_indices(goal_indices, "goal_indices")
-        self.weight = float(weight)
-        self.period = _check_period(period)
 
     def __call__(self, plans: Tensor, goals: Tensor) -> Tensor:
         """

@@ -83,9 +83,7 @@ class LangevinPlanner:
         self.horizon = config.horizon
         self.state_dim = state_dim
         self.device = torch.device(device)
-        low, high = as_bounds(state_low, state_high, state_dim)
-        self.state_low = None if low is None else low.to(self.device)
-        self.state_high = None if high is None else high.to(self.device)
+        self.state_low, self.state_high = as_bounds(state_low, state_high, state_dim, self.device)
 
     def plan(
         self,

@@ -139,9 +139,7 @@ class MPPIPlanner:
         self.state_dim = state_dim
         self.device = torch.device(device)
         self.noise = StompNoise(config.horizon, config.noise_scale, config.terminal_first_difference, device=self.device)
-        low, high = as_bounds(state_low, state_high, state_dim)
-        self.state_low = None if low is None else low.to(self.device)
-        self.state_high = None if high is None else high.to(self.device)
+        self.state_low, self.state_high = as_bounds(state_low, state_high, state_dim, self.device)
         # Compiled callables, built on first use; not pickled (the agent saves the planner with the model).
         self._compiled_energy: tuple[object, Callable[..., Tensor]] | None = None
         self._compiled_mix: Callable[..., Tensor] | None = None

@@ -105,7 +105,10 @@ def initial_plan(start: Tensor, horizon: int) -> Tensor:
 
 
 def as_bounds(
-    low: np.ndarray | Tensor | None, high: np.ndarray | Tensor | None, state_dim: int
+    low: np.ndarray | Tensor | None,
+    high: np.ndarray | Tensor | None,
+    state_dim: int,
+    device: str | torch.device | None = None,
 ) -> tuple[Tensor | None, Tensor | None]:
     """
     Validate optional per-dim state bounds and convert them to float tensors.
@@ -113,6 +116,7 @@ def as_bounds(
     :param low: lower bounds [D] (or a scalar), or None for none.
     :param high: upper bounds [D] (or a scalar), or None for none.
     :param state_dim: D.
+    :param device: device to put the bounds on (None: where they are).
     :return: (low [D] or None, high [D] or None) as float32 tensors; infinite entries mean unbounded.
     """
     bounds: list[Tensor | None] = []
@@ -125,7 +129,7 @@ def as_bounds(
             tensor = tensor.expand(state_dim).clone()
         if tensor.numel() != state_dim:
             raise ValueError(f"{name} must have one value per state dim ({state_dim}), got {tensor.numel()} values.")
-        bounds.append(tensor)
+        bounds.append(tensor if device is None else tensor.to(device))
     if bounds[0] is not None and bounds[1] is not None and bool((bounds[0] > bounds[1]).any()):
         raise ValueError(f"state_low must be <= state_high on every dim, got {bounds[0].tolist()} and {bounds[1].tolist()}.")
     return bounds[0], bounds[1]
