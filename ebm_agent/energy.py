@@ -10,9 +10,10 @@ from torch import Tensor, nn
 from torch.nn.utils import parametrize
 
 from ebm_agent.config import check_field_types
+from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.networks import build_mlp, make_activation, normalise_dims
 
-__all__ = ["EnergyConfig", "EnergyModel"]
+__all__ = ["EnergyConfig", "EnergyModel", "TransitionEvaluator"]
 
 
 @dataclass
@@ -131,5 +132,62 @@ class EnergyModel(nn.Module):
             pairs = pairs * mask
         return self.net(pairs).reshape(leading)  # [M, 1] -> [...]
 
+    def inference_evaluator(self, dtype: torch.dtype | None = None) -> TransitionEvaluator | None:
+        """
+        A gradient-free evaluator of this energy that reuses its activation buffers (see :mod:`ebm_agent.fast_mlp`).
+
+        It snapshots the current weights: build it when the weights are final (the planner builds one per plan).
+
+        :param dtype: compute dtype (``torch.bfloat16`` does what ``torch.autocast`` does to this network: matmuls
+            and activations in bf16, energies returned in bf16); None computes in the weights' dtype.
+        :return: a callable with :meth:`forward`'s signature and results, or None when the network cannot be evaluated
+            that way (spectral norm in training mode).
+        """
+        network = WorkspaceMLP.from_sequential(self.net, dtype)
+        if network is None:
+            return None
+        return TransitionEvaluator(network, self.state_dim, self.input_mask if self.masked_dims else None)  # type: ignore[arg-type]
+
     def extra_repr(self) -> str:
         return f"state_dim={self.state_dim}, masked_dims={self.masked_dims}"
+
+
+class TransitionEvaluator:
+    """
+    E(s, s') through a :class:`WorkspaceMLP`: the pairs are written into a reused [M, 2D] buffer.
+
+    :param network: the snapshot of the energy network.
+    :param state_dim: D.
+    :param input_mask: the [2D] input mask, or None when no dim is masked.
+    """
+
+    def __init__(self, network: WorkspaceMLP, state_dim: int, input_mask: Tensor | None) -> None:
+        self.network = network
+        self.state_dim = state_dim
+        self.input_mask = input_mask
+        self._pairs: Tensor | None = None
+
+    def __call__(self, states: Tensor, next_states: Tensor) -> Tensor:
+        """
+        :param states: [..., D] states s_t.
+        :param next_states: [..., D] next states, same shape.
+        :return: [...] energies.
+        """
+        if states.shape != next_states.shape or states.ndim == 0 or states.shape[-1] != self.state_dim:
+            raise ValueError(
+                f"expected states and next_states of the same shape [..., {self.state_dim}], got "
+                f"{tuple(states.shape)} and {tuple(next_states.shape)}."
+            )
+        leading = states.shape[:-1]
+        count = states[..., 0].numel()
+        dtype = self.network.layers[0][0].dtype
+        if states.dtype != dtype:
+            states, next_states = states.to(dtype), next_states.to(dtype)
+        pairs = self._pairs
+        if pairs is None or pairs.shape[0] != count or pairs.dtype != dtype or pairs.device != states.device:
+            pairs = torch.empty(count, 2 * self.state_dim, dtype=dtype, device=states.device)  # [M, 2D]
+            self._pairs = pairs
+        torch.cat([states, next_states], dim=-1, out=pairs.view(*leading, 2 * self.state_dim))
+        if self.input_mask is not None:
+            pairs.mul_(self.input_mask)
+        return self.network(pairs).reshape(leading)  # [M, 1] -> [...]

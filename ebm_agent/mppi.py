@@ -19,10 +19,19 @@ from torch import Tensor
 
 from ebm_agent.config import check_field_types
 from ebm_agent.costs import PlanCost
+from ebm_agent.energy import EnergyModel
 from ebm_agent.planner import PlanResult, as_bounds, clip_states, initial_plan, validate_plan_inputs
 from ebm_agent.stomp import StompNoise
 
-__all__ = ["AUTOCAST_DTYPES", "CPU_CHUNK_TRANSITIONS", "NOISE_BLOCK_BYTES", "MPPIConfig", "MPPIPlanner", "softmax_average"]
+__all__ = [
+    "AUTOCAST_DTYPES",
+    "CPU_CHUNK_TRANSITIONS",
+    "NOISE_BLOCK_BYTES",
+    "MPPIConfig",
+    "MPPIPlanner",
+    "native_bf16",
+    "softmax_average",
+]
 
 AUTOCAST_DTYPES: dict[str, torch.dtype] = {"bf16": torch.bfloat16, "fp16": torch.float16}
 """Names accepted by ``MPPIConfig.autocast`` and the dtype the cost's matmuls then run in."""
@@ -62,10 +71,12 @@ class MPPIConfig:
         per cost call; None picks ``CPU_CHUNK_TRANSITIONS`` on CPU and no chunking on other devices, 0 disables it.
         Chunking changes nothing but the batch size of the energy's matmuls (results agree to float rounding).
     :param autocast: ``"bf16"`` or ``"fp16"`` to evaluate the cost under ``torch.autocast`` (the energy's matmuls
-        in that dtype, the sums over time, the softmax and the plan itself in float32), or None for float32. bf16
-        keeps about 3 significant digits of each energy, which is coarse next to the default temperature of 1e-4:
-        plans differ from float32 ones by about the noise scale (tests/agent/test_mppi_speed_paths.py); 1.5-3x
-        faster for K x T >= 5,000 on CPU.
+        in that dtype, the sums over time, the softmax and the plan itself in float32), None for float32, or
+        ``"auto"`` (the default): bf16 on a CPU with native bf16 dot products (AVX512-BF16 or AMX), float32
+        elsewhere (CUDA included, where it is untested). bf16 keeps about 3 significant digits of each energy; the
+        plans differ from float32 ones by about the noise scale (tests/agent/test_mppi_speed_paths.py) and their
+        float32 costs by less than planning with another seed does (docs/benchmarks.md, ``--quality``); 1.5-3x
+        faster on such CPUs. The final cost of a plan is always computed in float32.
     """
 
     horizon: int = 10
@@ -78,7 +89,7 @@ class MPPIConfig:
     compile: bool = False
     compile_options: dict[str, Any] | None = None
     chunk_transitions: int | None = None
-    autocast: str | None = None
+    autocast: str | None = "auto"
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -104,9 +115,10 @@ class MPPIConfig:
             raise ValueError(
                 f"MPPIConfig.chunk_transitions must be None (automatic), 0 (no chunking) or an int > 0, got {chunk!r}."
             )
-        if self.autocast is not None and self.autocast not in AUTOCAST_DTYPES:
+        if self.autocast is not None and self.autocast != "auto" and self.autocast not in AUTOCAST_DTYPES:
             raise ValueError(
-                f"MPPIConfig.autocast must be None (float32) or one of {sorted(AUTOCAST_DTYPES)}, got {self.autocast!r}."
+                f"MPPIConfig.autocast must be None (float32), 'auto' or one of {sorted(AUTOCAST_DTYPES)}, "
+                f"got {self.autocast!r}."
             )
 
 
@@ -239,6 +251,13 @@ class MPPIPlanner:
         self.state_high = None if self.state_high is None else self.state_high.to(self.device)
         return self
 
+    @property
+    def autocast_dtype(self) -> torch.dtype | None:
+        """The dtype the cost's matmuls run in during the iterations (None: float32), ``config.autocast`` resolved."""
+        if self.config.autocast == "auto":
+            return torch.bfloat16 if native_bf16(self.device) else None
+        return None if self.config.autocast is None else AUTOCAST_DTYPES[self.config.autocast]
+
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_compiled_energy"] = None
@@ -295,6 +314,15 @@ class MPPIPlanner:
         """The cost as evaluated inside the loop: with the compiled transition energy and under autocast if set."""
         cost_fn: CostFn = cost
         energy = getattr(cost, "transition_energy", None)
+        autocast = self.autocast_dtype
+        use_buffers = not (self.config.compile or torch.is_grad_enabled())
+        evaluator = energy.inference_evaluator(autocast) if use_buffers and isinstance(energy, EnergyModel) else None
+        if evaluator is not None and isinstance(cost, PlanCost):
+            # The same energies (autocast's, in bf16) without an allocation per layer and chunk (ebm_agent/fast_mlp.py);
+            # the goal and prior terms are elementwise, so autocast would not have changed them.
+            fast = copy.copy(cost)
+            fast.transition_energy = evaluator
+            return fast
         if self.config.compile and isinstance(cost, PlanCost) and energy is not None:
             if self._compiled_energy is None or self._compiled_energy[0] is not energy:
                 self._compiled_energy = (energy, torch.compile(energy, **(self.config.compile_options or {})))
@@ -302,9 +330,9 @@ class MPPIPlanner:
             fast = copy.copy(cost)
             fast.transition_energy = self._compiled_energy[1]
             cost_fn = fast
-        if self.config.autocast is None:
+        if autocast is None:
             return cost_fn
-        device_type, dtype = self.device.type, AUTOCAST_DTYPES[self.config.autocast]
+        device_type, dtype = self.device.type, autocast
         inner = cost_fn
 
         def autocast_cost(plans: Tensor, goals: Tensor | None) -> Tensor:
@@ -319,6 +347,22 @@ class MPPIPlanner:
         if self._compiled_mix is None:
             self._compiled_mix = torch.compile(softmax_average, **(self.config.compile_options or {}))
         return self._compiled_mix
+
+
+def native_bf16(device: torch.device) -> bool:
+    """
+    Whether ``autocast="auto"`` plans in bf16 on this device: a CPU with AVX512-BF16 or AMX tiles.
+
+    :param device: the planner's device.
+    :return: True on such a CPU; False on others and on every non-CPU device.
+    """
+    if device.type != "cpu":
+        return False
+    probes = ("_is_avx512_bf16_supported", "_is_amx_tile_supported")
+    try:
+        return any(bool(getattr(torch.cpu, name)()) for name in probes if hasattr(torch.cpu, name))
+    except RuntimeError:  # a torch build without the CPU feature probes
+        return False
 
 
 def softmax_average(

@@ -4,9 +4,12 @@ Prints markdown tables, all measured in the same run so that the ratios compare 
 
 1. **Plan time**: ms per ``MPPIPlanner.plan`` (one env) over a grid of state dims D, candidates K, horizons T and
    iterations I, in float32 and with ``autocast="bf16"``, next to ``pytorch_mppi.MPPI`` on the equivalent problem
-   and the ratio. The variants are timed interleaved, repeat by repeat, and the table shows medians.
-2. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
-3. **learn throughput**: transitions per second and peak memory of ``EBMPlannerAgent.learn`` and SB3 ``PPO.learn``
+   and the ratio. The variants are timed interleaved, repeat by repeat, and the table shows medians. The default
+   precision (``autocast="auto"``) is one of the two, named in the report.
+2. **Plan quality in bf16** (``--quality N``): the float32 cost of N particle plans made in bf16 and in float32 with
+   the same noise, next to float32 plans made with other noise: bf16 should move the cost less than a new seed does.
+3. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
+4. **learn throughput**: transitions per second and peak memory of ``EBMPlannerAgent.learn`` and SB3 ``PPO.learn``
    on ``ebm/Particle-v0``, each in its own subprocess.
 
 What is timed for pytorch-mppi (0.9): ``MPPI.command(state, shift_nominal_trajectory=False)`` is one MPPI
@@ -40,7 +43,7 @@ from torch import Tensor, nn
 
 from ebm_agent.costs import GaussianGoalEnergy, PlanCost
 from ebm_agent.energy import EnergyModel
-from ebm_agent.mppi import MPPIConfig, MPPIPlanner
+from ebm_agent.mppi import MPPIConfig, MPPIPlanner, native_bf16
 from ebm_agent.networks import build_mlp
 
 __all__ = ["PlanTiming", "bench_learn", "bench_plan", "main", "pytorch_mppi_version"]
@@ -172,7 +175,7 @@ def bench_plan(
     :return: the median times.
     """
     variants = {
-        "ours": _ours(state_dim, samples, horizon, iterations, device),
+        "ours": _ours(state_dim, samples, horizon, iterations, device, autocast=None),
         "bf16": _ours(state_dim, samples, horizon, iterations, device, autocast="bf16"),
     }
     if compare:
@@ -187,6 +190,52 @@ def bench_plan(
     return PlanTiming(
         str(device), state_dim, samples, horizon, iterations, medians["ours"], medians["bf16"], medians.get("theirs")
     )
+
+
+def bench_quality(problems: int) -> dict[str, float]:
+    """
+    How much bf16 planning changes plan quality, measured against the change from planning with another seed.
+
+    The agent's own planner and cost on ``ebm/Particle-v0`` (untrained energy, reward goal, acceleration prior) plan
+    from ``problems`` random starts to random goals three ways: float32, bf16 with the same generator seed, and float32
+    with another seed; each plan is scored by the float32 cost.
+
+    :param problems: the number of start/goal pairs.
+    :return: {"bf16_mean", "bf16_std", "seed_mean", "seed_std", "bf16_worse"}: the mean and std over problems of the
+        cost difference to the float32 plan, and the fraction of problems where bf16 was worse.
+    """
+    import copy
+
+    import gymnasium as gym
+    import numpy as np
+
+    import envs  # noqa: F401  (registers ebm/Particle-v0)
+    from ebm_agent import EBMPlannerAgent
+
+    agent = EBMPlannerAgent("MultiInputPolicy", gym.make(ENV_ID), seed=0, device="cpu")
+    base = agent.planner
+    assert isinstance(base, MPPIPlanner)
+    planners = {}
+    for name, autocast in (("fp32", None), ("bf16", "bf16")):
+        config = copy.copy(base.config)
+        config.autocast = autocast
+        planners[name] = MPPIPlanner(config, base.state_dim, base.state_low, base.state_high)
+    rng = np.random.default_rng(0)
+    costs: dict[str, list[float]] = {"fp32": [], "bf16": [], "seed": []}
+    for problem in range(problems):
+        start, goal = (torch.tensor(rng.uniform(-1.0, 1.0, (1, 2)), dtype=torch.float32) for _ in range(2))
+        for name, planner, seed in (("fp32", "fp32", problem), ("bf16", "bf16", problem), ("seed", "fp32", problem + 10**6)):
+            result = planners[planner].plan(start, goal, agent.plan_cost, generator=torch.Generator().manual_seed(seed))
+            costs[name].append(float(result.costs[0]))
+    fp32 = np.asarray(costs["fp32"])
+    bf16, seed = np.asarray(costs["bf16"]) - fp32, np.asarray(costs["seed"]) - fp32
+    return {
+        "bf16_mean": float(bf16.mean()),
+        "bf16_std": float(bf16.std()),
+        "seed_mean": float(seed.mean()),
+        "seed_std": float(seed.std()),
+        "bf16_worse": float((bf16 > 0).mean()),
+    }
 
 
 def bench_compile(device: torch.device, repeats: int) -> dict[str, float]:
@@ -334,6 +383,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--threads", type=int, default=2, help="torch CPU threads")
     parser.add_argument("--learn-steps", type=int, default=1000, help="total_timesteps of each learn() (0 skips)")
     parser.add_argument("--no-compile", action="store_true", help="skip the torch.compile section")
+    parser.add_argument("--quality", type=int, default=30, help="plans of the bf16 quality check (0 skips)")
     parser.add_argument("--note", action="append", default=[], help="a line to add to the report's header")
     parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
@@ -375,11 +425,28 @@ def main(argv: Sequence[str] | None = None) -> None:
             rows.append(row)
             print(_plan_table([row], True)[-1], flush=True)
     report += _plan_table(rows, compare)
+    default = "bf16" if native_bf16(devices[0]) else "float32"
     report += [
         "",
         "What is timed: see the docstring of `eval/bench.py`. `theirs / ours` > 1 means our planner is faster; only ratios",
         "from the same run are comparable (timings on the shared machines vary by 30-40% between runs).",
+        f"The default precision (`MPPIConfig.autocast='auto'`) on this machine's CPU is **{default}** (bf16 where the",
+        "CPU has native bf16 dot products, AVX512-BF16 or AMX; float32 elsewhere and on CUDA).",
     ]
+    if args.quality > 0:
+        quality = bench_quality(args.quality)
+        report += [
+            "",
+            f"## Plan quality in bf16 ({args.quality} particle plans, float32 cost of each plan)",
+            "",
+            "| change from the float32 plan | mean | std |",
+            "|---|---|---|",
+            f"| bf16, same noise | {quality['bf16_mean']:+.4f} | {quality['bf16_std']:.4f} |",
+            f"| float32, another seed | {quality['seed_mean']:+.4f} | {quality['seed_std']:.4f} |",
+            "",
+            f"bf16 was worse on {100 * quality['bf16_worse']:.0f}% of the problems. A bf16 change smaller than a new",
+            "seed's means bf16 rounding costs less plan quality than the sampling noise of MPPI itself.",
+        ]
     if not args.no_compile:
         timings = bench_compile(devices[0], args.repeats)
         report += [

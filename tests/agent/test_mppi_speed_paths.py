@@ -52,7 +52,9 @@ def energy_problem(state_dim: int = 3, num_envs: int = 3) -> tuple[Tensor, Tenso
 def test_plan_equals_the_plain_loop_exactly(include_mean: bool, bounds: str | None, num_samples: int) -> None:
     start, goals, cost = energy_problem()
     limits = {"both": {"state_low": [-0.5] * 3, "state_high": [0.5] * 3}, "high": {"state_high": [0.2] * 3}, None: {}}
-    config = MPPIConfig(horizon=HORIZON, num_samples=num_samples, iterations=5, noise_scale=1e-3, include_mean=include_mean)
+    config = MPPIConfig(
+        horizon=HORIZON, num_samples=num_samples, iterations=5, noise_scale=1e-3, include_mean=include_mean, autocast=None
+    )
     planner = MPPIPlanner(config, state_dim=3, **limits[bounds])
     noise = planner.draw_noise(3, 5, torch.Generator().manual_seed(0))  # [I, N, K, T, D]
     result = planner.plan(start, goals, cost, noise=noise)
@@ -67,7 +69,9 @@ def test_same_seed_same_plan_and_batched_equals_each_env_alone(monkeypatch, bloc
     # The second size draws the noise in blocks of 2 iterations (5 = 2 + 2 + 1) instead of all 5 at once.
     monkeypatch.setattr(mppi, "NOISE_BLOCK_BYTES", block_bytes)
     start, goals, cost = energy_problem()
-    planner = MPPIPlanner(MPPIConfig(horizon=HORIZON, num_samples=16, iterations=5, noise_scale=1e-3), state_dim=3)
+    planner = MPPIPlanner(
+        MPPIConfig(horizon=HORIZON, num_samples=16, iterations=5, noise_scale=1e-3, autocast=None), state_dim=3
+    )
     seeded = planner.plan(start, goals, cost, generator=torch.Generator().manual_seed(5))
     noise = planner.draw_noise(3, 5, torch.Generator().manual_seed(5))
     assert noise.shape == (5, 3, 16, HORIZON, 3)
@@ -80,7 +84,7 @@ def test_same_seed_same_plan_and_batched_equals_each_env_alone(monkeypatch, bloc
 
 def test_chunked_scoring_matches_one_call() -> None:
     start, goals, cost = energy_problem()
-    config = dict(horizon=HORIZON, num_samples=50, iterations=4, noise_scale=1e-3)
+    config = dict(horizon=HORIZON, num_samples=50, iterations=4, noise_scale=1e-3, autocast=None)
     calls: list[int] = []
 
     def counting_cost(plans: Tensor, goals: Tensor | None) -> Tensor:
@@ -117,7 +121,7 @@ def test_bf16_autocast_is_close_to_float32() -> None:
     cost.transition_energy = spy
     config = dict(horizon=HORIZON, num_samples=64, iterations=40, noise_scale=1e-3)
     generator_seed = 3
-    plain = MPPIPlanner(MPPIConfig(**config), state_dim=3).plan(
+    plain = MPPIPlanner(MPPIConfig(**config, autocast=None), state_dim=3).plan(
         start, goals, cost, generator=torch.Generator().manual_seed(generator_seed)
     )
     assert set(spy.dtypes) == {torch.float32}
@@ -140,8 +144,8 @@ def test_compile_path_matches_eager_and_is_not_pickled() -> None:
     start, goals, cost = energy_problem(state_dim=2, num_envs=2)
     options = {"backend": "aot_eager"}  # dynamo tracing without code generation: fast, same kernels as eager
     config = dict(horizon=HORIZON, num_samples=16, iterations=3, noise_scale=1e-3)
-    eager = MPPIPlanner(MPPIConfig(**config), state_dim=2)
-    compiled = MPPIPlanner(MPPIConfig(**config, compile=True, compile_options=options), state_dim=2)
+    eager = MPPIPlanner(MPPIConfig(**config, autocast=None), state_dim=2)
+    compiled = MPPIPlanner(MPPIConfig(**config, compile=True, compile_options=options, autocast=None), state_dim=2)
     noise = eager.draw_noise(2, 3, torch.Generator().manual_seed(0))
     expected = eager.plan(start, goals, cost, noise=noise)
     result = compiled.plan(start, goals, cost, noise=noise)
@@ -159,8 +163,8 @@ def test_compile_path_matches_eager_and_is_not_pickled() -> None:
 def test_inductor_compile_is_close_to_eager() -> None:
     start, goals, cost = energy_problem(state_dim=2, num_envs=2)
     config = dict(horizon=HORIZON, num_samples=32, iterations=10, noise_scale=1e-3, temperature=1e-2)
-    eager = MPPIPlanner(MPPIConfig(**config), state_dim=2)
-    compiled = MPPIPlanner(MPPIConfig(**config, compile=True), state_dim=2)
+    eager = MPPIPlanner(MPPIConfig(**config, autocast=None), state_dim=2)
+    compiled = MPPIPlanner(MPPIConfig(**config, compile=True, autocast=None), state_dim=2)
     noise = eager.draw_noise(2, 10, torch.Generator().manual_seed(0))
     torch.testing.assert_close(
         compiled.plan(start, goals, cost, noise=noise).plans,
@@ -212,7 +216,7 @@ def test_the_planning_loop_never_reads_back_to_the_host(autocast: str | None, de
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 def test_cuda_plan_matches_cpu() -> None:
     start, goals, cost = energy_problem()
-    config = MPPIConfig(horizon=HORIZON, num_samples=32, iterations=5, noise_scale=1e-3)
+    config = MPPIConfig(horizon=HORIZON, num_samples=32, iterations=5, noise_scale=1e-3, autocast=None)
     cpu = MPPIPlanner(config, state_dim=3, state_low=[-1.0] * 3, state_high=[1.0] * 3)
     noise = cpu.draw_noise(3, 5, torch.Generator().manual_seed(0))
     expected = cpu.plan(start, goals, cost, noise=noise)

@@ -1,0 +1,136 @@
+"""Inference-only evaluation of :func:`ebm_agent.networks.build_mlp` networks with reused activation buffers.
+
+The planner scores tens of thousands of transitions per MPPI iteration, dozens of iterations per plan. Each plain
+``nn.Sequential`` call allocates one fresh [M, hidden] tensor per layer and activation. On CPU, buffers of a few MB
+come from ``mmap`` and are returned to the system when freed, so every allocation pays page faults for memory it then
+overwrites: at M = 4,096 transitions and width 128 this doubled the time of the whole energy call on the benchmark
+machine (docs/benchmarks.md). :class:`WorkspaceMLP` writes each layer into a buffer it keeps between calls
+(``torch.addmm(..., out=)``) and applies the activation in place; it runs the same kernels on the same numbers as the
+module, so the energies are identical.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import torch
+from torch import Tensor, nn
+from torch.nn.utils import parametrize
+
+__all__ = ["MAX_WORKSPACES", "WorkspaceMLP"]
+
+MAX_WORKSPACES = 4
+"""Buffer sets kept per evaluator (one per batch size seen: the chunks of a plan, its last chunk, the final score)."""
+
+_InPlace = Callable[[Tensor], object]
+
+
+def _in_place_activation(module: nn.Module) -> _InPlace | None:
+    """The in-place version of a supported activation module, or None."""
+    if isinstance(module, nn.LeakyReLU):
+        slope = module.negative_slope
+        return lambda x: torch.nn.functional.leaky_relu_(x, slope)
+    if isinstance(module, nn.ReLU):
+        return torch.relu_
+    if isinstance(module, nn.SiLU):
+        return lambda x: torch.nn.functional.silu(x, inplace=True)
+    if isinstance(module, nn.Tanh):
+        return torch.tanh_
+    return None
+
+
+class WorkspaceMLP:
+    """
+    A snapshot of an MLP's weights, evaluated without gradients into reused buffers.
+
+    Build it with :meth:`from_sequential` right before a batch of evaluations (e.g. once per plan): it reads the
+    weights once (parametrisations such as the energy's ``abs()`` output included) and does not see later updates.
+
+    :param layers: (weight [out, in], bias [out] or None, in-place activation or None) per Linear layer.
+    """
+
+    def __init__(self, layers: list[tuple[Tensor, Tensor | None, _InPlace | None]]) -> None:
+        if not layers:
+            raise ValueError("WorkspaceMLP needs at least one Linear layer.")
+        self.layers = layers
+        self.in_features = layers[0][0].shape[1]
+        self._workspaces: dict[tuple[int, torch.dtype, torch.device, bool], list[Tensor]] = {}
+
+    @classmethod
+    def from_sequential(cls, net: nn.Sequential, dtype: torch.dtype | None = None) -> WorkspaceMLP | None:
+        """
+        Snapshot ``Linear - activation - ... - Linear`` networks as built by ``build_mlp``.
+
+        :param net: the network.
+        :param dtype: the dtype to compute in (weights cast once, inputs cast on each call), e.g. ``torch.bfloat16``
+            for what ``torch.autocast`` would do; None keeps the weights' dtype.
+        :return: the evaluator, or None when the network has another shape, another module type, or a parametrisation
+            that changes state when evaluated (spectral norm in training mode runs a power iteration per call).
+        """
+        modules = list(net)
+        layers: list[tuple[Tensor, Tensor | None, _InPlace | None]] = []
+        with torch.no_grad():
+            for index, module in enumerate(modules):
+                if isinstance(module, nn.Linear):
+                    if parametrize.is_parametrized(module) and module.training and _has_stateful_parametrization(module):
+                        return None
+                    weight = module.weight.detach()
+                    bias: Tensor | None = None if module.bias is None else module.bias.detach()
+                    if dtype is not None:
+                        weight, bias = weight.to(dtype), None if bias is None else bias.to(dtype)
+                    layers.append((weight, bias, None))
+                    continue
+                activation = _in_place_activation(module)
+                if activation is None or index == 0 or not isinstance(modules[index - 1], nn.Linear):
+                    return None
+                weight, bias, _ = layers[-1]
+                layers[-1] = (weight, bias, activation)
+        if not layers or not isinstance(modules[-1], nn.Linear):
+            return None
+        return cls(layers)
+
+    def __call__(self, inputs: Tensor) -> Tensor:
+        """
+        Evaluate the network.
+
+        :param inputs: [M, in] inputs (any memory layout and floating dtype).
+        :return: [M, out] outputs in the compute dtype, a fresh tensor (the hidden activations live in the reused buffers).
+        :raises RuntimeError: when called with gradients enabled (the buffers cannot be part of a graph).
+        """
+        if torch.is_grad_enabled():
+            raise RuntimeError("WorkspaceMLP is for inference only: call it under torch.inference_mode() or no_grad().")
+        if inputs.ndim != 2 or inputs.shape[1] != self.in_features:
+            raise ValueError(f"WorkspaceMLP expects inputs [M, {self.in_features}], got {tuple(inputs.shape)}.")
+        dtype = self.layers[0][0].dtype
+        x = inputs if inputs.dtype == dtype else inputs.to(dtype)
+        hidden = self._workspace(x)
+        last = len(self.layers) - 1
+        for index, (weight, bias, activation) in enumerate(self.layers):
+            out = None if index == last else hidden[index]  # [M, out_i]; the output is allocated fresh
+            if bias is None:
+                x = torch.mm(x, weight.t()) if out is None else torch.mm(x, weight.t(), out=out)
+            else:
+                x = torch.addmm(bias, x, weight.t()) if out is None else torch.addmm(bias, x, weight.t(), out=out)
+            if activation is not None:
+                activation(x)
+        return x
+
+    def _workspace(self, inputs: Tensor) -> list[Tensor]:
+        key = (inputs.shape[0], inputs.dtype, inputs.device, torch.is_inference_mode_enabled())
+        buffers = self._workspaces.get(key)
+        if buffers is None:
+            if len(self._workspaces) >= MAX_WORKSPACES:
+                self._workspaces.clear()
+            sizes = [weight.shape[0] for weight, _, _ in self.layers[:-1]]
+            buffers = [torch.empty(inputs.shape[0], size, dtype=inputs.dtype, device=inputs.device) for size in sizes]
+            self._workspaces[key] = buffers
+        return buffers
+
+
+def _has_stateful_parametrization(module: nn.Module) -> bool:
+    """True when a parametrisation of ``module`` may update buffers when evaluated (anything but a stateless one)."""
+    parametrizations = getattr(module, "parametrizations", {})
+    return any(
+        any(list(p.buffers()) for p in parametrization)  # e.g. spectral norm's power-iteration vectors u, v
+        for parametrization in parametrizations.values()
+    )
