@@ -97,3 +97,25 @@ def test_auto_precision_follows_the_device() -> None:
     assert MPPIPlanner(MPPIConfig(autocast="fp16"), state_dim=2).autocast_dtype == torch.float16
     with pytest.raises(ValueError, match="'auto'"):
         MPPIConfig(autocast="float8")
+
+
+def test_bf16_falls_back_to_buffers_when_the_fused_op_is_missing(monkeypatch) -> None:
+    from ebm_agent import fast_mlp
+
+    torch.manual_seed(0)
+    energy = EnergyModel(2)
+    inputs = torch.randn(30, 4)
+    mlp = WorkspaceMLP.from_sequential(energy.net, torch.bfloat16)
+    assert mlp is not None
+    with torch.inference_mode():
+        with torch.autocast("cpu", dtype=torch.bfloat16):
+            expected = energy.net(inputs).float()
+        if mlp.post_ops is not None:  # this build has oneDNN's fused op: make it fail as a future torch might
+
+            def missing(*args: object) -> None:
+                raise RuntimeError("no such op")
+
+            monkeypatch.setattr(fast_mlp, "_fused_linear", lambda: missing)
+        result = mlp(inputs)
+    assert mlp.post_ops is None, "after a failure the evaluator stays on the buffer path"
+    torch.testing.assert_close(result.float(), expected, rtol=1e-2, atol=1e-2)
