@@ -196,7 +196,7 @@ class VelocityPrior:
         :return: costs [N, K].
         """
         states = plans if self.dims is None else _select(plans, self.dims)
-        velocity = states[..., 1:, :] - states[..., :-1, :]  # [N, K, T, D']
+        velocity = torch.diff(states, dim=-2)  # [N, K, T, D']: s_{t+1} - s_t
         return self.weight * velocity.square().mean(dim=(-2, -1))
 
 
@@ -222,7 +222,7 @@ class AccelerationPrior:
         states = plans if self.dims is None else _select(plans, self.dims)
         if states.shape[-2] < 3:
             return plans.new_zeros(plans.shape[:-2])
-        acceleration = states[..., 2:, :] - 2.0 * states[..., 1:-1, :] + states[..., :-2, :]  # [N, K, T-1, D']
+        acceleration = torch.diff(states, n=2, dim=-2)  # [N, K, T-1, D']: s_{t+2} - 2 s_{t+1} + s_t
         return self.weight * acceleration.square().mean(dim=(-2, -1))
 
 
@@ -377,10 +377,14 @@ class PlanCost:
         if self.goal_energy is not None:
             if goals is None:
                 raise ValueError("this PlanCost has a goal energy, so goals [N, G] must be given (got None).")
-            values.append(self._checked(self.prior_scale * self.goal_energy(plans, goals), plans, "goal energy"))
+            values.append(self._checked(self._scaled(self.goal_energy(plans, goals)), plans, "goal energy"))
         for extra in self.extra_energies:
-            values.append(self._checked(self.prior_scale * extra(plans), plans, type(extra).__name__))
+            values.append(self._checked(self._scaled(extra(plans)), plans, type(extra).__name__))
         return values
+
+    def _scaled(self, term: Tensor) -> Tensor:
+        # Skipping the multiplication by the usual 1.0 saves one op per term and MPPI iteration (same values).
+        return term if self.prior_scale == 1.0 else self.prior_scale * term
 
     def with_extra(self, *extra: ExtraEnergy) -> PlanCost:
         """

@@ -132,7 +132,7 @@ class EnergyModel(nn.Module):
             pairs = pairs * mask
         return self.net(pairs).reshape(leading)  # [M, 1] -> [...]
 
-    def inference_evaluator(self, dtype: torch.dtype | None = None) -> TransitionEvaluator | None:
+    def inference_evaluator(self, dtype: torch.dtype | None = None, fused: bool = True) -> TransitionEvaluator | None:
         """
         A gradient-free evaluator of this energy that reuses its activation buffers (see :mod:`ebm_agent.fast_mlp`).
 
@@ -140,10 +140,12 @@ class EnergyModel(nn.Module):
 
         :param dtype: compute dtype (``torch.bfloat16`` does what ``torch.autocast`` does to this network: matmuls
             and activations in bf16, energies returned in bf16); None computes in the weights' dtype.
+        :param fused: use oneDNN's fused layers on CPU when available (faster; float32 energies equal the module's to
+            float rounding); False gives the module's float32 energies bit for bit.
         :return: a callable with :meth:`forward`'s signature and results, or None when the network cannot be evaluated
             that way (spectral norm in training mode).
         """
-        network = WorkspaceMLP.from_sequential(self.net, dtype)
+        network = WorkspaceMLP.from_sequential(self.net, dtype, fused)
         if network is None:
             return None
         return TransitionEvaluator(network, self.state_dim, self.input_mask if self.masked_dims else None)  # type: ignore[arg-type]

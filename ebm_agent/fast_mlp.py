@@ -6,9 +6,11 @@ come from ``mmap`` and are returned to the system when freed, so every allocatio
 overwrites: at M = 4,096 transitions and width 128 this doubled the time of the whole energy call on the benchmark
 machine (docs/benchmarks.md). :class:`WorkspaceMLP` writes each layer into a buffer it keeps between calls
 (``torch.addmm(..., out=)``) and applies the activation in place; it runs the same kernels on the same numbers as the
-module, so the energies are identical. In bf16 on CPU it uses oneDNN's fused linear + activation instead (the kernel
-``torch.compile`` picks for such layers), which was 1.25x faster again at the planner's sizes; bf16 energies match
-autocast's to bf16 rounding, not bit for bit.
+module, so the energies are identical. On CPU it uses oneDNN's fused linear + activation instead when torch has it (the
+kernel ``torch.compile`` picks for such layers): in float32 it was 2x faster than the BLAS matmul plus a separate
+activation for batches of up to ~1,000 rows on the benchmark machine (so the planner scores in chunks of that size,
+see ``ebm_agent.mppi.CPU_CHUNK_TRANSITIONS``), and 1.25x faster in bf16. Its float32 energies agree with the module's
+to float rounding (a few 1e-7), not bit for bit; bf16 ones with autocast's to bf16 rounding.
 """
 
 from __future__ import annotations
@@ -75,13 +77,15 @@ class WorkspaceMLP:
         self._workspaces: dict[tuple[int, torch.dtype, torch.device, bool], list[Tensor]] = {}
 
     @classmethod
-    def from_sequential(cls, net: nn.Sequential, dtype: torch.dtype | None = None) -> WorkspaceMLP | None:
+    def from_sequential(cls, net: nn.Sequential, dtype: torch.dtype | None = None, fused: bool = True) -> WorkspaceMLP | None:
         """
         Snapshot ``Linear - activation - ... - Linear`` networks as built by ``build_mlp``.
 
         :param net: the network.
         :param dtype: the dtype to compute in (weights cast once, inputs cast on each call), e.g. ``torch.bfloat16``
             for what ``torch.autocast`` would do; None keeps the weights' dtype.
+        :param fused: use oneDNN's fused linear + activation on CPU when torch has it; False always uses the buffers
+            (bit-for-bit the module's float32 energies).
         :return: the evaluator, or None when the network has another shape, another module type, or a parametrisation
             that changes state when evaluated (spectral norm in training mode runs a power iteration per call).
         """
@@ -108,7 +112,7 @@ class WorkspaceMLP:
                 post_ops[-1] = activation[1]
         if not layers or not isinstance(modules[-1], nn.Linear):
             return None
-        fused = dtype == torch.bfloat16 and layers[0][0].device.type == "cpu" and _fused_linear() is not None
+        fused = fused and layers[0][0].device.type == "cpu" and _fused_linear() is not None
         return cls(layers, post_ops if fused else None)
 
     def __call__(self, inputs: Tensor) -> Tensor:
@@ -147,7 +151,10 @@ class WorkspaceMLP:
         assert self.post_ops is not None and linear_pointwise is not None
         try:
             for (weight, bias, _), (name, scalars) in zip(self.layers, self.post_ops, strict=True):
-                x = linear_pointwise(x, weight, bias, name, scalars, "")  # [M, out_i]
+                if name == "none" and weight.shape[0] == 1:  # the energy's [128 -> 1]: a plain mm is 2x faster
+                    x = torch.mm(x, weight.t()) if bias is None else torch.addmm(bias, x, weight.t())
+                else:
+                    x = linear_pointwise(x, weight, bias, name, scalars, "")  # [M, out_i]
         except (RuntimeError, NotImplementedError):  # a private op: another torch version may lack or change it
             self.post_ops = None
             return None

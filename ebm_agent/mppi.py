@@ -40,9 +40,11 @@ NOISE_BLOCK_BYTES = 16 * 2**20
 """The noise of several iterations is drawn in one call when it fits in this many bytes (one randn + one matmul
 instead of one per iteration); larger problems draw it iteration by iteration."""
 
-CPU_CHUNK_TRANSITIONS = 4096
-"""Default ``MPPIConfig.chunk_transitions`` on CPU: an MLP energy on 4,096 transitions keeps its activations
-(4,096 x 128 floats per layer) in cache; one call on 81,920 was 3x slower per transition on the benchmark machine."""
+CPU_CHUNK_TRANSITIONS = 1024
+"""Default ``MPPIConfig.chunk_transitions`` on CPU: an MLP energy on 1,024 transitions keeps its activations (1,024 x
+128 floats per layer, 512 KB) in cache and below the size from which each fresh buffer costs page faults; oneDNN's
+fused layers (ebm_agent/fast_mlp.py) were 2x slower per transition from 2,048 rows on, and one call on 81,920 rows 3x
+slower, on the benchmark machine."""
 
 CostFn = Callable[[Tensor, Tensor | None], Tensor]
 
@@ -71,12 +73,12 @@ class MPPIConfig:
         per cost call; None picks ``CPU_CHUNK_TRANSITIONS`` on CPU and no chunking on other devices, 0 disables it.
         Chunking changes nothing but the batch size of the energy's matmuls (results agree to float rounding).
     :param autocast: ``"bf16"`` or ``"fp16"`` to evaluate the cost under ``torch.autocast`` (the energy's matmuls
-        in that dtype, the sums over time, the softmax and the plan itself in float32), None for float32, or
-        ``"auto"`` (the default): bf16 on a CPU with native bf16 dot products (AVX512-BF16 or AMX), float32
-        elsewhere (CUDA included, where it is untested). bf16 keeps about 3 significant digits of each energy; the
-        plans differ from float32 ones by about the noise scale (tests/agent/test_mppi_speed_paths.py) and their
-        float32 costs by less than planning with another seed does (docs/benchmarks.md, ``--quality``); 1.5-3x
-        faster on such CPUs. The final cost of a plan is always computed in float32.
+        in that dtype, the sums over time, the softmax and the plan itself in float32), or None (the default) for
+        float32. bf16 keeps about 3 significant digits of each energy, coarse next to the default temperature of
+        1e-4: on random problems the plans' float32 costs move less than with another seed (docs/benchmarks.md), but
+        a particle agent trained for 2,000 transitions scored -27 in bf16 against -4.6 in float32 (its last
+        centimetre to the goal is below bf16's resolution), so it is opt-in. 1.5-3x faster on CPUs with native bf16
+        (AVX512-BF16 or AMX, see :func:`native_bf16`). The final cost of a plan is always computed in float32.
     """
 
     horizon: int = 10
@@ -89,7 +91,7 @@ class MPPIConfig:
     compile: bool = False
     compile_options: dict[str, Any] | None = None
     chunk_transitions: int | None = None
-    autocast: str | None = "auto"
+    autocast: str | None = None
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -115,10 +117,9 @@ class MPPIConfig:
             raise ValueError(
                 f"MPPIConfig.chunk_transitions must be None (automatic), 0 (no chunking) or an int > 0, got {chunk!r}."
             )
-        if self.autocast is not None and self.autocast != "auto" and self.autocast not in AUTOCAST_DTYPES:
+        if self.autocast is not None and self.autocast not in AUTOCAST_DTYPES:
             raise ValueError(
-                f"MPPIConfig.autocast must be None (float32), 'auto' or one of {sorted(AUTOCAST_DTYPES)}, "
-                f"got {self.autocast!r}."
+                f"MPPIConfig.autocast must be None (float32) or one of {sorted(AUTOCAST_DTYPES)}, got {self.autocast!r}."
             )
 
 
@@ -253,9 +254,7 @@ class MPPIPlanner:
 
     @property
     def autocast_dtype(self) -> torch.dtype | None:
-        """The dtype the cost's matmuls run in during the iterations (None: float32), ``config.autocast`` resolved."""
-        if self.config.autocast == "auto":
-            return torch.bfloat16 if native_bf16(self.device) else None
+        """The dtype the cost's matmuls run in during the iterations (None: float32)."""
         return None if self.config.autocast is None else AUTOCAST_DTYPES[self.config.autocast]
 
     def __getstate__(self) -> dict[str, Any]:
@@ -351,7 +350,7 @@ class MPPIPlanner:
 
 def native_bf16(device: torch.device) -> bool:
     """
-    Whether ``autocast="auto"`` plans in bf16 on this device: a CPU with AVX512-BF16 or AMX tiles.
+    Whether ``autocast="bf16"`` runs on native bf16 dot products on this device: a CPU with AVX512-BF16 or AMX tiles.
 
     :param device: the planner's device.
     :return: True on such a CPU; False on others and on every non-CPU device.
@@ -381,8 +380,8 @@ def softmax_average(
     """
     # A NaN or infinite cost (e.g. an energy that blew up) gets zero weight instead of poisoning the average.
     finite = torch.isfinite(costs)
-    costs = torch.where(finite, costs, torch.full_like(costs, float("inf")))
-    weights = torch.softmax(-costs / temperature, dim=1)  # [N, K]
+    costs = torch.where(finite, costs, float("inf"))
+    weights = torch.softmax(costs * (-1.0 / temperature), dim=1)  # [N, K]
     new_tail = (weights[:, :, None, None] * candidate_tails).sum(dim=1)  # [N, T, D]
     new_tail = clip_states(new_tail, low, high)
     # An env whose candidates all have non-finite costs keeps its mean (a device-side select, no host sync).

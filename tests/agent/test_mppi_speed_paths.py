@@ -3,6 +3,7 @@ give the plans of the plain computation (exactly, or within the stated tolerance
 
 from __future__ import annotations
 
+import copy
 import pickle
 
 import pytest
@@ -21,9 +22,24 @@ HORIZON = 10
 
 
 def reference_plan(planner: MPPIPlanner, start: Tensor, goals: Tensor, cost: PlanCost, noise: Tensor) -> Tensor:
-    """The MPPI loop written plainly: a fresh cat of the pinned start into every candidate, every iteration."""
+    """
+    The MPPI loop written plainly: a fresh cat of the pinned start into every candidate, every iteration.
+
+    Its energy runs on the same kernels as the planner's (oneDNN's fused layers where available), so that a
+    difference can only come from the loop; tests/agent/test_fast_mlp.py compares those kernels with the module.
+    """
+    if isinstance(cost.transition_energy, EnergyModel):
+        cost = copy.copy(cost)
+        cost.transition_energy = cost.transition_energy.inference_evaluator()
+    with torch.inference_mode():
+        return _reference_loop(planner, start, goals, cost, noise).clone()
+
+
+def _reference_loop(planner: MPPIPlanner, start: Tensor, goals: Tensor, cost: PlanCost, noise: Tensor) -> Tensor:
     config = planner.config
     mean = initial_plan(start, planner.horizon)
+    # The planner clips the initial plan's s_1..s_T to the bounds (the pinned start stays where it is).
+    mean = torch.cat([mean[:, :1], clip_states(mean[:, 1:], planner.state_low, planner.state_high)], dim=1)
     for perturbation in noise:  # [N, K, T, D]
         mean_tail = mean[:, 1:]
         tails = clip_states(mean_tail[:, None] + perturbation, planner.state_low, planner.state_high)
