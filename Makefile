@@ -43,5 +43,15 @@ bench-envs: $(STAMP)
 bench: $(STAMP)
 	$(PY) -m eval.bench
 
+# The paper's tables and figures at the paper's budgets (days of CPU time; resumable: rerun to continue, finished
+# runs are skipped), then docs/results.md. `make results RESULTS_JOBS=4` runs 4 at a time. The document is
+# regenerated even when a run failed (it says which), and the target then fails.
+RESULTS_DIR  ?= runs/results
+RESULTS_JOBS ?= 1
+results: $(STAMP)
+	$(VENV)/bin/ebm-eval --experiment all --scale paper -f $(RESULTS_DIR) --jobs $(RESULTS_JOBS) --no-progress; \
+	status=$$?; \
+	$(PY) -m eval.results_doc -f $(RESULTS_DIR) --docs docs/results.md && exit $$status
+
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

@@ -6,6 +6,13 @@
     ebm-eval --config ray_sweep_example --executor ray --address auto   # on a Ray cluster (docs/ray.md)
 
 Settings come from three layers, the later winning: built-in defaults, the ``--config`` preset, explicit flags.
+
+The paper's experiments (``eval.experiments``) run by name, resumably, and regenerate docs/results.md:
+
+    ebm-eval --experiment list                                   # experiments, parts, estimated cost
+    ebm-eval --experiment table1 --part 'table1/particle/*' -f runs/results --jobs 2
+    ebm-eval --experiment all -f runs/results                    # everything (days of CPU time)
+    ebm-eval --report-only -f runs/results                       # only docs/results.md
 """
 
 from __future__ import annotations
@@ -14,6 +21,7 @@ import argparse
 import importlib
 import json
 import math
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -52,6 +60,16 @@ DEFAULTS: dict[str, Any] = {
 
 SUBJECT = "ebm"
 """The agent under test: always run, unless ``--agents`` lists the agents explicitly."""
+
+RESULTS_DIR = "runs/results"
+"""Default results folder of ``--experiment``."""
+
+PAPER_DOC = "docs/results.md"
+"""Default document of ``--experiment`` at the paper's scale (other scales write ``<out>/results.md``)."""
+
+SWEEP_ONLY = ("env", "baseline", "agents", "timesteps", "eval_episodes", "eval_freq", "config", "env_kwargs")
+SWEEP_ONLY_MORE = ("eval_env_kwargs", "hyperparams")
+EXPERIMENT_ONLY = ("part", "scale", "docs")
 
 
 def positive_int(text: str) -> int:
@@ -235,6 +253,40 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="[AGENT:]KEY=VALUE",
         help="agent keyword arguments, values in YAML; a plain key goes to the EBM agent, AGENT:KEY to that agent "
         "(e.g. horizon=20 ppo:n_steps=256)",
+    )
+    experiments = parser.add_argument_group(
+        "paper experiments",
+        "run the paper's tables and figures by name (eval/experiments.py), resumably, and write "
+        "docs/results.md; the sweep flags above (--env, --timesteps, ...) do not apply",
+    )
+    experiments.add_argument(
+        "--experiment",
+        nargs="+",
+        action="extend",
+        metavar="NAME",
+        help="experiment(s) to run: table1, table2, sawyer_ppo, fixed_on_variable, inverse_dynamics, obstacle, "
+        "plan_diversity, reacher_directions, maze_exploration, sawyer_exploration, energy_maps; all; or list "
+        "(print the experiments, their parts and estimated cost)",
+    )
+    experiments.add_argument(
+        "--part",
+        nargs="+",
+        action="extend",
+        metavar="GLOB",
+        help="only the parts matching these globs, e.g. 'table1/particle/*' or '*/sawyer*' (default: all parts)",
+    )
+    experiments.add_argument(
+        "--scale", help="paper (the paper's budgets; default) or smoke (tiny budgets, runs in <out>/smoke/)"
+    )
+    experiments.add_argument(
+        "--report-only",
+        action="store_true",
+        help="only regenerate the results document from the results folder (no training)",
+    )
+    experiments.add_argument(
+        "--docs",
+        metavar="PATH",
+        help=f"the results document (default: {PAPER_DOC} at the paper's scale, else <out>/results.md)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     parser.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity of the agents: 0, 1 or 2 (default: 0)")
@@ -446,6 +498,53 @@ def _anchors_for(jobs: Sequence[Job]) -> dict[str, Any]:
     return anchors
 
 
+def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Check the flags of ``--experiment`` / ``--report-only`` and fill in their defaults.
+
+    :param args: parsed flags.
+    :return: experiments, parts, scale, seeds, out, docs, device and the executor's settings.
+    :raises ValueError: for a flag that does not apply, an unknown experiment or scale.
+    """
+    from eval.experiments import EXPERIMENTS
+    from eval.parts import SCALES
+
+    given = [key for key in (*SWEEP_ONLY, *SWEEP_ONLY_MORE) if getattr(args, key, None) is not None]
+    if given:
+        flags = ", ".join("--" + key.replace("_", "-") for key in given)
+        raise ValueError(
+            f"{flags}: not with --experiment, whose experiments fix their envs, agents and budgets "
+            "(choose --scale, --seeds and --part instead)"
+        )
+    names = list(args.experiment or ["all"])
+    known = [*EXPERIMENTS, "all", "list"]
+    unknown = [name for name in names if name not in known]
+    if unknown:
+        raise ValueError(f"unknown experiment(s) {', '.join(map(repr, unknown))}; choose from: {', '.join(known)}")
+    if "list" in names and len(names) > 1:
+        raise ValueError("--experiment list prints the experiments; give it alone")
+    scale = args.scale or "paper"
+    if scale not in SCALES:
+        raise ValueError(f"unknown scale {scale!r}; choose one of: {', '.join(SCALES)}")
+    out = args.out or RESULTS_DIR
+    settings: dict[str, Any] = {
+        "experiments": names,
+        "parts": list(args.part) if args.part else None,
+        "scale": scale,
+        "seeds": list(args.seeds) if args.seeds else None,
+        "out": out,
+        "docs": args.docs or (PAPER_DOC if scale == "paper" else str(Path(out) / "results.md")),
+        "report_only": bool(args.report_only),
+        "device": args.device or "auto",
+        "jobs": args.jobs or 1,
+        "executor": args.executor or "local",
+        "address": args.address,
+        "cpus_per_job": args.cpus_per_job,
+        "gpus_per_job": args.gpus_per_job,
+    }
+    _check_ray_settings(settings)
+    return settings
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run ``ebm-eval``.
 
@@ -454,6 +553,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.experiment is not None or args.report_only:
+        from eval.experiment_runner import run_experiments, selected_parts
+
+        try:
+            experiment_settings = resolve_experiment_settings(args)
+            parts = selected_parts(experiment_settings)
+            executor = executor_from_name(experiment_settings["executor"], **executor_options(experiment_settings))
+        except (ValueError, TypeError) as error:
+            parser.error(str(error))  # exits 2, like any bad flag
+        command_line = shlex.join(["ebm-eval", *(sys.argv[1:] if argv is None else argv)])
+        return run_experiments(experiment_settings, parts, executor, command_line, progress=not args.no_progress)
+    given = [key for key in (*EXPERIMENT_ONLY,) if getattr(args, key, None) is not None]
+    if given:
+        flags = ", ".join("--" + key.replace("_", "-") for key in given)
+        parser.error(f"{flags}: only with --experiment (or --report-only)")
     try:
         settings = resolve_settings(args)
         executor = executor_from_name(settings["executor"], **executor_options(settings))

@@ -3,16 +3,22 @@
 ``run_job`` is a pure function of its ``Job``: it is what a process-pool worker (``LocalExecutor``) or a
 distributed task (a Ray executor) runs, and its ``JobResult`` carries only plain Python values back.
 
-Run folder ``<out>/<env_short>/<agent>/seed_<k>/``:
+A job learns either online (``mode="online"``: ``learn(total_timesteps)``, Algorithm 1 for the planners) or from
+a fixed dataset (``mode="pretrained"``: the paper's pretrained rows, Tables 1-2; see ``eval.pretraining``), then
+is evaluated the same way, so both write the same files.
 
-- ``config.yaml``: the job and the library versions;
+Run folder ``<out>[/<variant>]/<env_short>/<agent>/seed_<k>/``:
+
+- ``config.yaml``: the job, its fingerprint and the library versions;
 - ``evaluations.npz``: SB3's ``EvalCallback`` file (``timesteps``, ``results``, ``ep_lengths``[, ``successes``]),
-  with the final evaluation appended when the callback's last one was earlier;
-- ``metrics.json``: the final deterministic evaluation, the transitions really consumed, wall times;
+  with the final evaluation appended when the callback's last one was earlier (a pretrained run has one row);
+- ``metrics.json``: the final deterministic evaluation, any extra evaluations, the transitions really consumed,
+  wall times, the machine and the job's fingerprint (``eval.provenance.completed_result`` reads it back, so that a
+  finished job is skipped);
 - ``model.zip``: the trained model; ``error.txt`` instead when the job failed.
 
-TensorBoard events go to ``<out>/tb/<env_short>/<agent>_s<seed>_1/`` so that ``tensorboard --logdir <out>``
-shows every agent and seed of an env side by side.
+TensorBoard events go to ``<out>[/<variant>]/tb/<env_short>/<agent>_s<seed>_1/`` so that ``tensorboard --logdir
+<out>`` shows every agent and seed of an env side by side.
 """
 
 from __future__ import annotations
@@ -23,12 +29,24 @@ import time
 import traceback
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
+if TYPE_CHECKING:  # SB3 loads only inside a run
+    from eval.evaluation import EpisodeScores
+
 EVAL_SEED_OFFSET = 10_000
 """The evaluation env is seeded ``seed + EVAL_SEED_OFFSET`` so that it never replays the training env's episodes."""
+
+MODES = ("online", "pretrained")
+"""How a job learns: online interaction (``learn``) or a fixed dataset (``learn_offline``)."""
+
+DATASETS = ("random", "directed", "directed+sequential")
+"""Datasets of pretrained jobs (paper Table 2); see ``eval.pretraining``."""
+
+RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", "error.txt")
+"""Files a run writes; a rerun removes stale ones first (an old ``evaluations.npz`` would join the new curve)."""
 
 
 @dataclass(frozen=True)
@@ -49,6 +67,17 @@ class Job:
     :param out_dir: root folder of the sweep.
     :param verbose: SB3 verbosity of the agent.
     :param progress_bar: show SB3's progress bar during ``learn`` (for in-process runs).
+    :param mode: ``"online"`` (learn from ``timesteps`` transitions of interaction) or ``"pretrained"`` (learn
+        offline from a dataset of ``timesteps`` transitions, then evaluate; only agents with ``learn_offline``).
+    :param dataset: pretrained only: ``"random"``, ``"directed"`` or ``"directed+sequential"`` (``eval.pretraining``).
+    :param offline_kwargs: pretrained only: ``epochs``, ``batch_size`` of ``learn_offline`` and ``repeat`` (copies
+        of each transition in the sequential dataset); unset keys take ``eval.pretraining``'s defaults.
+    :param dataset_kwargs: pretrained, directed only: keyword arguments of the EBM agent that collects the dataset.
+    :param extra_evaluations: name -> changes to the evaluation env's kwargs: the trained model is also evaluated
+        on each such env (e.g. ``{"variable_goal": {"goal": "variable"}}`` for a fixed-goal model); the scores go to
+        ``metrics.json`` under ``extra_evaluations``.
+    :param variant: a label of the training configuration; it prefixes the run folder (``<out>/<variant>/...``) so
+        that runs of several configurations of one env and agent live side by side.
     """
 
     env_id: str
@@ -64,6 +93,25 @@ class Job:
     out_dir: str = "runs"
     verbose: int = 0
     progress_bar: bool = False
+    mode: str = "online"
+    dataset: str = "random"
+    offline_kwargs: dict[str, Any] = field(default_factory=dict)
+    dataset_kwargs: dict[str, Any] = field(default_factory=dict)
+    extra_evaluations: dict[str, dict[str, Any]] = field(default_factory=dict)
+    variant: str = ""
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ValueError(f"Job.mode must be one of {MODES}, got {self.mode!r}")
+        if self.dataset not in DATASETS:
+            raise ValueError(f"Job.dataset must be one of {DATASETS}, got {self.dataset!r}")
+        if Path(self.variant).is_absolute() or ".." in Path(self.variant).parts:
+            raise ValueError(f"Job.variant must be a relative folder name inside the output folder, got {self.variant!r}")
+
+    @property
+    def root(self) -> Path:
+        """``<out>/<variant>``, or ``<out>`` without a variant."""
+        return Path(self.out_dir) / self.variant if self.variant else Path(self.out_dir)
 
     @property
     def env_short(self) -> str:
@@ -72,13 +120,13 @@ class Job:
 
     @property
     def run_dir(self) -> Path:
-        """``<out>/<env_short>/<agent>/seed_<k>``."""
-        return Path(self.out_dir) / self.env_short / self.agent / f"seed_{self.seed}"
+        """``<out>[/<variant>]/<env_short>/<agent>/seed_<k>``."""
+        return self.root / self.env_short / self.agent / f"seed_{self.seed}"
 
     @property
     def tensorboard_log(self) -> Path:
-        """``<out>/tb/<env_short>``: one TensorBoard folder per env, one subfolder per agent and seed."""
-        return Path(self.out_dir) / "tb" / self.env_short
+        """``<out>[/<variant>]/tb/<env_short>``: one TensorBoard folder per env, one subfolder per agent and seed."""
+        return self.root / "tb" / self.env_short
 
     @property
     def tb_log_name(self) -> str:
@@ -172,11 +220,15 @@ def run_job(job: Job) -> JobResult:
     :param job: the run.
     :return: the result.
     """
+    from eval.provenance import job_fingerprint
+
     start = time.perf_counter()
     run_dir = job.run_dir
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
-        config = {**to_plain(asdict(job)), "versions": library_versions()}
+        for name in RUN_OUTPUTS:
+            (run_dir / name).unlink(missing_ok=True)
+        config = {**to_plain(asdict(job)), "fingerprint": job_fingerprint(job), "versions": library_versions()}
         (run_dir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         return _train_and_evaluate(job, start)
     except Exception:  # a failed run must not end the sweep
@@ -189,11 +241,11 @@ def run_job(job: Job) -> JobResult:
 
 
 def _train_and_evaluate(job: Job, start: float) -> JobResult:
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.env_util import make_vec_env
 
     import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
-    from eval.evaluation import append_evaluation, evaluate_episodes, last_evaluation
+    from eval.evaluation import append_evaluation, evaluate_episodes
+    from eval.provenance import job_fingerprint, machine_info
     from eval.registry import get_agent
 
     spec = get_agent(job.agent)
@@ -207,43 +259,32 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         hyperparams=dict(job.hyperparams),
         verbose=job.verbose,
     )
-    eval_kwargs = dict(job.env_kwargs if job.eval_env_kwargs is None else job.eval_env_kwargs)
+    eval_kwargs = evaluation_env_kwargs(job)
     eval_env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
     try:
-        # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
-        eval_callback = EvalCallback(
-            eval_env,
-            n_eval_episodes=job.eval_episodes,
-            eval_freq=max(job.eval_freq // model.n_envs, 1),
-            log_path=str(run_dir),
-            deterministic=True,
-            verbose=0,
-            warn=False,
-        )
-        extra = spec.callbacks(job.timesteps) if spec.callbacks is not None else []
         learn_start = time.perf_counter()
-        model.learn(
-            total_timesteps=job.timesteps,
-            callback=CallbackList([*extra, eval_callback]),
-            tb_log_name=job.tb_log_name,
-            progress_bar=job.progress_bar,
-        )
+        pretraining: dict[str, Any] | None = None
+        if job.mode == "pretrained":
+            from eval.pretraining import pretrain
+
+            pretraining = pretrain(model, job)
+            timesteps, reused = int(pretraining["dataset_size"]), None
+        else:
+            timesteps, reused = _learn_online(model, job, eval_env, spec.callbacks)
         learn_time = time.perf_counter() - learn_start
-        timesteps = int(model.num_timesteps)
         eval_start = time.perf_counter()
-        # An evaluation EvalCallback just ran at the final step is the final evaluation (same call, same env):
-        # reuse it rather than pay for the episodes twice, which for a planner costs as much as learning.
-        reused = last_evaluation(eval_callback, timesteps, job.eval_episodes)
         episodes = reused or evaluate_episodes(model, eval_env, job.eval_episodes)
         eval_time = time.perf_counter() - eval_start
         append_evaluation(run_dir / "evaluations.npz", timesteps, episodes)
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
+        extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
         wall_time = time.perf_counter() - start
         metrics = {
             "env_id": job.env_id,
             "agent": job.agent,
             "seed": job.seed,
+            "mode": job.mode,
             "budget": job.timesteps,
             "timesteps": timesteps,
             "budget_respected": timesteps == job.timesteps,
@@ -254,13 +295,19 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "episode_lengths": episodes.lengths,
             "success_rate": episodes.success_rate,
             "episode_successes": episodes.successes,
-            "final_evaluation": "EvalCallback at the final step" if reused else "evaluate_policy after learn",
+            "final_evaluation": "EvalCallback at the final step" if reused else "evaluate_policy after learning",
+            "eval_env_kwargs": to_plain(eval_kwargs),
+            "extra_evaluations": extra,
+            "pretraining": pretraining,
             "wall_time_s": wall_time,
             "learn_time_s": learn_time,
             "eval_time_s": eval_time,
+            "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "machine": machine_info(model.device),
+            "fingerprint": job_fingerprint(job),
             "versions": library_versions(),
         }
-        (run_dir / "metrics.json").write_text(json.dumps(metrics, indent=2))
+        (run_dir / "metrics.json").write_text(json.dumps(to_plain(metrics), indent=2))
         return JobResult(
             job=job,
             status="ok",
@@ -279,6 +326,72 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         training_env = model.get_env()
         if training_env is not None:
             training_env.close()
+
+
+def evaluation_env_kwargs(job: Job) -> dict[str, Any]:
+    """Keyword arguments of the job's evaluation env: ``eval_env_kwargs``, or the training env's when None.
+
+    :param job: the job.
+    :return: a fresh dict.
+    """
+    return dict(job.env_kwargs if job.eval_env_kwargs is None else job.eval_env_kwargs)
+
+
+def _learn_online(model: Any, job: Job, eval_env: Any, callbacks: Any) -> tuple[int, EpisodeScores | None]:
+    """``learn`` for exactly the budget with ``EvalCallback`` writing the learning curve.
+
+    :return: the transitions consumed and the callback's final-step evaluation when it can stand as the final one.
+    """
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+
+    from eval.evaluation import last_evaluation
+
+    # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
+    eval_callback = EvalCallback(
+        eval_env,
+        n_eval_episodes=job.eval_episodes,
+        eval_freq=max(job.eval_freq // model.n_envs, 1),
+        log_path=str(job.run_dir),
+        deterministic=True,
+        verbose=0,
+        warn=False,
+    )
+    extra = callbacks(job.timesteps) if callbacks is not None else []
+    model.learn(
+        total_timesteps=job.timesteps,
+        callback=CallbackList([*extra, eval_callback]),
+        tb_log_name=job.tb_log_name,
+        progress_bar=job.progress_bar,
+    )
+    timesteps = int(model.num_timesteps)
+    # An evaluation EvalCallback just ran at the final step is the final evaluation (same call, same env):
+    # reuse it rather than pay for the episodes twice, which for a planner costs as much as learning.
+    return timesteps, last_evaluation(eval_callback, timesteps, job.eval_episodes)
+
+
+def _extra_evaluation(model: Any, job: Job, changes: dict[str, Any]) -> dict[str, Any]:
+    """Evaluate the trained model on the evaluation env with ``changes`` to its kwargs (same seed, same episodes).
+
+    :return: the env kwargs used and the scores, as in ``metrics.json``.
+    """
+    from stable_baselines3.common.env_util import make_vec_env
+
+    from eval.evaluation import evaluate_episodes
+
+    kwargs = {**evaluation_env_kwargs(job), **changes}
+    env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    try:
+        episodes = evaluate_episodes(model, env, job.eval_episodes)
+    finally:
+        env.close()
+    return {
+        "env_kwargs": to_plain(kwargs),
+        "score_mean": episodes.score_mean,
+        "score_std": episodes.score_std,
+        "episode_scores": episodes.scores,
+        "episode_lengths": episodes.lengths,
+        "success_rate": episodes.success_rate,
+    }
 
 
 def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, success_rate: float | None) -> None:
@@ -301,4 +414,15 @@ def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, 
         logger.close()
 
 
-__all__ = ["EVAL_SEED_OFFSET", "Job", "JobResult", "env_short_name", "library_versions", "run_job", "to_plain"]
+__all__ = [
+    "DATASETS",
+    "EVAL_SEED_OFFSET",
+    "MODES",
+    "Job",
+    "JobResult",
+    "env_short_name",
+    "evaluation_env_kwargs",
+    "library_versions",
+    "run_job",
+    "to_plain",
+]

@@ -1,0 +1,325 @@
+"""The reproduction's claims (issue 6), judged from the measured numbers: "holds", "does not hold" or "not measured".
+
+Nothing here knows a verdict in advance: each claim names the numbers it compares (table cells by part, agent and
+evaluation; exploration figures by part) and ``evaluate_claims`` reads them through the lookups it is given.
+
+- A score comparison holds when the first agent's mean over seeds is higher (scores are sums of rewards: higher
+  is better). With at least 3 seeds on each side the evidence also gives each mean's 95% stratified-bootstrap
+  interval and says whether the intervals separate; with fewer it says so.
+- A claim over several envs holds when every comparison holds, does not hold when any measured one does not,
+  and is "not measured" while a comparison lacks its runs.
+- The exploration claim reads the exploration figures' metrics (``eval.figures``) at equal transitions: maze
+  coverage of the EBM vs the random agent after the same budget, Sawyer finger occupancy of the EBM at its budget
+  vs each random explorer's occupancy at that same budget, against the strongest random explorer. Keys are
+  slash-joined paths into the nested metrics (``agents/ebm/coverage/mean``). Should those keys be missing, a pair
+  of keys that differ only by ``ebm`` / ``random`` is used instead (spread statistics such as ``std`` excluded).
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from eval import stats
+
+HOLDS = "holds"
+FAILS = "does not hold"
+MISSING = "not measured"
+
+CellKey = tuple[str, str, str]
+"""(part name, agent, setting): one table cell (``eval.parts.Cell``)."""
+
+ScoreLookup = Callable[[CellKey], Sequence[float]]
+"""Per-seed scores of a cell; empty when it has not run."""
+
+FigureLookup = Callable[[str], Mapping[str, Any] | None]
+"""A figure part's metrics; None when it has not run."""
+
+MIN_SEEDS_FOR_CI = 3
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """One measured comparison behind a claim.
+
+    :param label: what it compares on (an env).
+    :param verdict: ``HOLDS``, ``FAILS`` or ``MISSING``.
+    :param evidence: the numbers, in words.
+    """
+
+    label: str
+    verdict: str
+    evidence: str
+
+
+@dataclass(frozen=True)
+class Claim:
+    """A claim with its verdict and the comparisons that decide it.
+
+    :param text: the claim.
+    :param verdict: ``HOLDS``, ``FAILS`` or ``MISSING``.
+    :param comparisons: the evidence, one comparison per env.
+    """
+
+    text: str
+    verdict: str
+    comparisons: tuple[Comparison, ...]
+
+
+@dataclass(frozen=True)
+class ScoreClaim:
+    """A claim that one agent scores higher than another, on each listed env.
+
+    :param text: the claim.
+    :param comparisons: (env label, the cell that should score higher, the other cell).
+    """
+
+    text: str
+    comparisons: tuple[tuple[str, CellKey, CellKey], ...]
+
+
+SCORE_CLAIMS = (
+    ScoreClaim(
+        "Online EBM beats online Action FF on particle, maze, Reacher and Sawyer",
+        (
+            ("particle", ("table1/particle/online", "ebm", "online"), ("table1/particle/online", "action-ff", "online")),
+            ("maze", ("table1/maze/online", "ebm", "online"), ("table1/maze/online", "action-ff", "online")),
+            ("reacher", ("table1/reacher/online", "ebm", "online"), ("table1/reacher/online", "action-ff", "online")),
+            (
+                "sawyer",
+                ("table2/sawyer/online_fixed", "ebm", "online fixed"),
+                ("table2/sawyer/online_fixed", "action-ff", "online fixed"),
+            ),
+        ),
+    ),
+    ScoreClaim(
+        "EBM beats PPO at equal budget on Sawyer",
+        (("sawyer", ("table2/sawyer/online_fixed", "ebm", "online fixed"), ("sawyer_ppo/1x", "ppo", "PPO 1x")),),
+    ),
+)
+"""The claims decided by table cells."""
+
+
+@dataclass(frozen=True)
+class ExplorationSpec:
+    """Where an exploration figure keeps the EBM's number and the random explorers' numbers at the same budget.
+
+    :param label: the env.
+    :param part: the figure part.
+    :param ebm_key: the EBM's number (a slash-joined path into the metrics).
+    :param random_keys: the random explorers' numbers at the EBM's budget; the highest is compared.
+    """
+
+    label: str
+    part: str
+    ebm_key: str
+    random_keys: tuple[str, ...]
+
+
+EXPLORATION_CLAIM = "EBM explores more than random actions (maze coverage, Sawyer finger occupancy)"
+EXPLORATION_FIGURES = (
+    ExplorationSpec("maze", "maze_exploration/maze", "agents/ebm/coverage/mean", ("agents/random/coverage/mean",)),
+    ExplorationSpec(
+        "sawyer",
+        "sawyer_exploration/sawyer",
+        "agents/ebm/occupancy/mean",
+        ("agents/random_uniform/occupancy_at_ebm_budget/mean", "agents/random_joint_targets/occupancy_at_ebm_budget/mean"),
+    ),
+)
+"""The exploration claim's figures."""
+
+SPREAD_STATISTICS = ("std", "min", "max", "low", "high", "ci", "sem")
+"""Last path components that describe a spread, never compared."""
+
+AGENT_NAMES = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
+
+
+def compare_scores(label: str, name: str, scores: Sequence[float], other_name: str, other: Sequence[float]) -> Comparison:
+    """Whether ``scores`` beat ``other`` on average, with the numbers as evidence.
+
+    :param label: what is compared (an env).
+    :param name: the first side's name.
+    :param scores: its per-seed scores [seeds] (empty: not run).
+    :param other_name: the second side's name.
+    :param other: its per-seed scores.
+    :return: the comparison.
+    """
+    if len(scores) == 0 or len(other) == 0:
+        missing = [n for n, s in ((name, scores), (other_name, other)) if len(s) == 0]
+        return Comparison(label, MISSING, f"{' and '.join(missing)} not run yet")
+    first, second = np.asarray(scores, dtype=np.float64), np.asarray(other, dtype=np.float64)
+    verdict = HOLDS if stats.mean(first) > stats.mean(second) else FAILS
+    evidence = f"{name} {_with_interval(first)} vs {other_name} {_with_interval(second)}"
+    if len(first) >= MIN_SEEDS_FOR_CI and len(second) >= MIN_SEEDS_FOR_CI:
+        low_a, high_a = stats.bootstrap_ci(first, stats.mean)
+        low_b, high_b = stats.bootstrap_ci(second, stats.mean)
+        separate = low_a > high_b or low_b > high_a
+        evidence += "; the 95% intervals separate" if separate else "; the 95% intervals overlap"
+    else:
+        evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds on a side, no interval"
+    return Comparison(label, verdict, evidence)
+
+
+def _with_interval(values: np.ndarray) -> str:
+    text = f"{stats.mean(values):.2f}"
+    if len(values) >= MIN_SEEDS_FOR_CI:
+        low, high = stats.bootstrap_ci(values, stats.mean)
+        text += f" [95% CI {low:.2f}, {high:.2f}]"
+    return text + f" ({len(values)} seed{'s' if len(values) != 1 else ''})"
+
+
+def combine(comparisons: Sequence[Comparison]) -> str:
+    """The verdict of a claim made of several comparisons.
+
+    :param comparisons: its comparisons.
+    :return: ``FAILS`` if any fails, ``HOLDS`` if all hold, else ``MISSING``.
+    """
+    verdicts = [c.verdict for c in comparisons]
+    if FAILS in verdicts:
+        return FAILS
+    if verdicts and all(v == HOLDS for v in verdicts):
+        return HOLDS
+    return MISSING
+
+
+def exploration_numbers(metrics: Mapping[str, Any], spec: ExplorationSpec) -> tuple[str, float, str, float] | None:
+    """The EBM's number and the strongest random explorer's number of an exploration figure.
+
+    :param metrics: the figure's metrics.
+    :param spec: where the numbers are.
+    :return: (EBM key, its value, random key, its value); ``exploration_pair``'s guess when the keys are missing.
+    """
+    flat = _flatten(metrics)
+    ours = _average(flat.get(spec.ebm_key))
+    theirs = [(key, _average(flat.get(key))) for key in spec.random_keys]
+    known = [(key, value) for key, value in theirs if value is not None]
+    if ours is None or not known:
+        return exploration_pair(metrics)
+    key, value = max(known, key=lambda pair: pair[1])
+    return spec.ebm_key, ours, key, value
+
+
+def exploration_pair(metrics: Mapping[str, Any]) -> tuple[str, float, str, float] | None:
+    """A guess of the EBM and random exploration numbers of a figure's metrics: keys differing by ``ebm``/``random``.
+
+    :param metrics: the figure's metrics (nested dicts allowed).
+    :return: (EBM key, its value, random key, its value), or None when no such pair exists.
+    """
+    flat = _flatten(metrics)
+    candidates = []
+    for key, value in flat.items():
+        if not re.search(r"ebm", key, flags=re.IGNORECASE) or re.search(r"timestep|transition|step", key, re.IGNORECASE):
+            continue
+        if key.rsplit("/", 1)[-1].lower() in SPREAD_STATISTICS:
+            continue
+        partner = re.sub(r"ebm", "random", key, flags=re.IGNORECASE)
+        partner = next((k for k in flat if k.lower() == partner.lower()), "")
+        ours, theirs = _average(value), _average(flat.get(partner))
+        if partner and ours is not None and theirs is not None:
+            rank = (
+                0 if re.search("coverage|occupan", key, re.IGNORECASE) else 1,
+                0 if re.search("final|mean", key, re.IGNORECASE) else 1,
+                key,
+            )
+            candidates.append((rank, key, ours, partner, theirs))
+    if not candidates:
+        return None
+    _, key, ours, partner, theirs = min(candidates)
+    return key, ours, partner, theirs
+
+
+def _flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in metrics.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            flat.update(_flatten(value, name + "/"))
+        else:
+            flat[name] = value
+    return flat
+
+
+def _average(value: Any) -> float | None:
+    """The mean of a number or a (nested) list of numbers; None for anything else."""
+    if isinstance(value, bool) or value is None:
+        return None
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return None
+    if array.size == 0 or not np.all(np.isfinite(array)):
+        return None
+    return float(array.mean())
+
+
+def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
+    """Judge every claim from the numbers the lookups return.
+
+    :param scores: per-seed scores of a table cell.
+    :param figures: metrics of a figure part.
+    :return: the claims with their verdicts and evidence.
+    """
+    claims = []
+    for spec in SCORE_CLAIMS:
+        comparisons = tuple(
+            compare_scores(label, _name(better), scores(better), _name(worse), scores(worse))
+            for label, better, worse in spec.comparisons
+        )
+        claims.append(Claim(spec.text, combine(comparisons), comparisons))
+    exploration = []
+    for spec_ in EXPLORATION_FIGURES:
+        label, part = spec_.label, spec_.part
+        metrics = figures(part)
+        pair = exploration_numbers(metrics, spec_) if metrics is not None else None
+        if metrics is None:
+            exploration.append(Comparison(label, MISSING, f"figure {part} not run yet"))
+        elif pair is None:
+            exploration.append(Comparison(label, MISSING, f"figure {part} reports no EBM / random pair of numbers"))
+        else:
+            key, ours, partner, theirs = pair
+            verdict = HOLDS if ours > theirs else FAILS
+            exploration.append(Comparison(label, verdict, f"{key} = {ours:.4g} vs {partner} = {theirs:.4g} ({part})"))
+    claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
+    return claims
+
+
+def _name(key: CellKey) -> str:
+    return AGENT_NAMES.get(key[1], key[1])
+
+
+def render_claims(claims: Sequence[Claim]) -> str:
+    """The claims as a markdown list, each comparison under its claim.
+
+    :param claims: from ``evaluate_claims``.
+    :return: markdown.
+    """
+    lines = []
+    for claim in claims:
+        lines.append(f"- **{claim.text}**: {claim.verdict}")
+        lines += [f"  - {c.label}: {c.verdict} ({c.evidence})" for c in claim.comparisons]
+    return "\n".join(lines)
+
+
+__all__ = [
+    "EXPLORATION_CLAIM",
+    "EXPLORATION_FIGURES",
+    "FAILS",
+    "HOLDS",
+    "MISSING",
+    "SCORE_CLAIMS",
+    "SPREAD_STATISTICS",
+    "Claim",
+    "Comparison",
+    "ExplorationSpec",
+    "ScoreClaim",
+    "combine",
+    "compare_scores",
+    "evaluate_claims",
+    "exploration_numbers",
+    "exploration_pair",
+    "render_claims",
+]

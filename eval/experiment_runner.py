@@ -1,0 +1,293 @@
+"""Runs experiment parts into one results folder, resumably, so that parts run separately merge into one report.
+
+- A job whose run folder already holds a finished run of the same configuration (``eval.provenance.
+  completed_result``: its ``metrics.json`` carries the job's fingerprint) is skipped and says so; an interrupted
+  or failed run is run again; a finished run of *another* configuration is moved aside to
+  ``seed_<k>.replaced-<fingerprint>`` (never deleted) before the new one runs.
+- Jobs of all selected parts run through one executor (``--jobs N`` processes, or Ray); runs shared by several
+  parts (Table 2's online fixed-goal runs) run once.
+- Figure parts call their ``eval.figures`` function in this process; a figure folder with a ``figure.json`` made at
+  the same scale and seeds is complete.
+- Every run and figure folder gets a ``provenance.json`` (command, part, date), and ``<out>/sessions.jsonl`` one
+  line per invocation (command, machine, start, wall time, what ran, was skipped or failed), which
+  ``eval.results_doc`` reports.
+"""
+
+from __future__ import annotations
+
+import shutil
+import sys
+import time
+import traceback
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from eval.executors import Executor
+from eval.jobs import Job, JobResult
+from eval.parts import Part
+from eval.provenance import (
+    append_session,
+    completed_result,
+    job_fingerprint,
+    machine_info,
+    now,
+    read_metrics,
+    read_provenance,
+    write_provenance,
+)
+
+Log = Callable[[str], None]
+
+
+def _stderr(message: str) -> None:
+    print(message, file=sys.stderr)
+
+
+@dataclass
+class RunSummary:
+    """What one invocation did.
+
+    :param ran: results of the jobs that ran.
+    :param skipped: results read back from finished runs.
+    :param figures_ran: figure parts that ran.
+    :param figures_skipped: figure parts already complete.
+    :param figures_failed: figure part -> the error's last line.
+    """
+
+    ran: list[JobResult] = field(default_factory=list)
+    skipped: list[JobResult] = field(default_factory=list)
+    figures_ran: list[str] = field(default_factory=list)
+    figures_skipped: list[str] = field(default_factory=list)
+    figures_failed: dict[str, str] = field(default_factory=dict)
+
+    @property
+    def ok(self) -> bool:
+        """True when nothing failed."""
+        return all(result.ok for result in self.ran) and not self.figures_failed
+
+
+def unique_jobs(parts: Sequence[Part]) -> list[Job]:
+    """The jobs of the parts, each run folder once.
+
+    :param parts: the parts.
+    :return: the jobs in part order.
+    :raises ValueError: when two parts give one run folder two configurations (a registry bug).
+    """
+    jobs: dict[Path, Job] = {}
+    for part in parts:
+        for job in part.jobs:
+            known = jobs.setdefault(job.run_dir, job)
+            if job_fingerprint(known) != job_fingerprint(job):
+                raise ValueError(f"{job.run_dir} is given two configurations (part {part.name}); give one a variant")
+    return list(jobs.values())
+
+
+def plan_jobs(jobs: Sequence[Job], log: Log = _stderr) -> tuple[list[Job], list[JobResult]]:
+    """Split jobs into those to run and those already finished; move finished runs of other configurations aside.
+
+    :param jobs: the jobs.
+    :param log: where the skip messages go.
+    :return: (jobs to run, results of finished ones).
+    """
+    to_run, finished = [], []
+    for job in jobs:
+        result = completed_result(job)
+        if result is not None:
+            log(f"skip {job.run_dir}: complete (same configuration, score {result.score_mean:.2f})")
+            finished.append(result)
+            continue
+        metrics = read_metrics(job.run_dir)
+        if metrics is not None and metrics.get("fingerprint") != job_fingerprint(job):
+            moved = _move_aside(job.run_dir, str(metrics.get("fingerprint")))
+            log(f"moved {job.run_dir} aside to {moved.name}: it holds a finished run of another configuration")
+        to_run.append(job)
+    return to_run, finished
+
+
+def _move_aside(folder: Path, tag: str) -> Path:
+    target = folder.with_name(f"{folder.name}.replaced-{tag}")
+    if target.exists():
+        target = folder.with_name(f"{target.name}-{time.strftime('%Y%m%d%H%M%S')}")
+    shutil.move(str(folder), str(target))
+    return target
+
+
+def run_parts(
+    parts: Sequence[Part],
+    executor: Executor,
+    command: str,
+    progress: bool = True,
+    log: Log = _stderr,
+) -> RunSummary:
+    """Run the parts' missing jobs and figures, skipping finished ones, and record where everything came from.
+
+    :param parts: the selected parts.
+    :param executor: runs the jobs.
+    :param command: the command line, recorded in each new run's ``provenance.json`` and in ``sessions.jsonl``.
+    :param progress: show a progress bar over jobs.
+    :param log: where progress messages go.
+    :return: what ran, was skipped or failed.
+    """
+    if not parts:
+        return RunSummary()
+    out_dir = Path(parts[0].out_dir)
+    started, start = now(), time.perf_counter()
+    jobs = unique_jobs(parts)
+    to_run, finished = plan_jobs(jobs, log)
+    part_of = _parts_by_run(parts)
+    if jobs:
+        log(f"ebm-eval: {len(to_run)} run(s) to do, {len(finished)} already complete, in {out_dir}/")
+    summary = RunSummary(skipped=finished)
+    summary.ran = executor.map(to_run, progress=progress) if to_run else []
+    for result in summary.ran:
+        write_provenance(
+            result.run_dir, command, parts=part_of.get(result.run_dir, []), scale=parts[0].scale, status=result.status
+        )
+        if not result.ok:
+            log(f"failed {result.run_dir}: {(result.error or '').strip().splitlines()[-1:]}")
+    for part in parts:
+        if part.figure is not None:
+            _run_figure(part, command, summary, log)
+    append_session(
+        out_dir,
+        {
+            "command": command,
+            "started": started,
+            "finished": now(),
+            "wall_time_s": time.perf_counter() - start,
+            "machine": machine_info(),
+            "parts": [part.name for part in parts],
+            "ran": [str(r.run_dir) for r in summary.ran if r.ok] + summary.figures_ran,
+            "skipped": [str(r.run_dir) for r in summary.skipped] + summary.figures_skipped,
+            "failed": [str(r.run_dir) for r in summary.ran if not r.ok] + sorted(summary.figures_failed),
+        },
+    )
+    return summary
+
+
+def _parts_by_run(parts: Sequence[Part]) -> dict[Path, list[str]]:
+    names: dict[Path, list[str]] = {}
+    for part in parts:
+        for job in part.jobs:
+            names.setdefault(job.run_dir, []).append(part.name)
+    return names
+
+
+def figure_complete(part: Part) -> bool:
+    """Whether the figure part's folder holds a ``figure.json`` made at the part's scale and seeds.
+
+    :param part: a figure part.
+    :return: True when complete.
+    """
+    folder = part.figure_dir
+    record = read_provenance(folder)
+    if not (folder / "figure.json").exists() or record is None:
+        return False
+    return record.get("scale") == part.scale and list(record.get("seeds", [])) == list(part.seeds)
+
+
+def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None:
+    folder = part.figure_dir
+    if figure_complete(part):
+        log(f"skip {folder}: complete (figure {part.figure}, same scale and seeds)")
+        summary.figures_skipped.append(part.name)
+        return
+    if folder.exists() and any(folder.iterdir()):
+        moved = _move_aside(folder, "old")
+        log(f"moved {folder} aside to {moved.name}: it holds another or an unfinished figure")
+    folder.mkdir(parents=True, exist_ok=True)
+    log(f"figure {part.figure} (seeds {list(part.seeds)}, scale {part.scale}) into {folder}/")
+    start = time.perf_counter()
+    try:
+        function = figure_function(str(part.figure))
+        result = function(folder, seeds=part.seeds, scale=part.scale)
+        if not (folder / "figure.json").exists() and hasattr(result, "save"):
+            result.save(folder)
+    except Exception:  # a failed figure must not cost the other parts
+        error = traceback.format_exc()
+        (folder / "error.txt").write_text(error)
+        summary.figures_failed[part.name] = error.strip().splitlines()[-1]
+        log(f"failed figure {part.figure}: {summary.figures_failed[part.name]}")
+        return
+    write_provenance(
+        folder,
+        command,
+        part=part.name,
+        scale=part.scale,
+        seeds=list(part.seeds),
+        wall_time_s=time.perf_counter() - start,
+        machine=machine_info(),
+    )
+    summary.figures_ran.append(part.name)
+
+
+def figure_function(name: str) -> Callable[..., Any]:
+    """The ``eval.figures`` function of a figure part, imported when needed.
+
+    :param name: its name (a key of ``eval.figures.FIGURES``).
+    :return: ``function(out_dir, *, seeds, scale) -> FigureResult``.
+    :raises ValueError: when ``eval.figures`` or the function is missing.
+    """
+    try:
+        from eval import figures  # type: ignore[attr-defined]
+    except ImportError as error:
+        raise ValueError(f"figure {name!r} needs eval.figures, which cannot be imported: {error}") from None
+    registry = getattr(figures, "FIGURES", {})
+    function = registry.get(name) if isinstance(registry, dict) else None
+    function = function or getattr(figures, name, None)
+    if not callable(function):
+        raise ValueError(f"eval.figures has no figure {name!r}")
+    return function  # type: ignore[no-any-return]
+
+
+def selected_parts(settings: dict[str, Any]) -> list[Part]:
+    """The parts ``ebm-eval --experiment`` selects (none for ``list`` and ``--report-only``).
+
+    :param settings: from ``eval.cli.resolve_experiment_settings``.
+    :return: the parts.
+    :raises ValueError: for a ``--part`` glob that matches no part.
+    """
+    from eval.experiments import build_parts, make_context, select_parts
+
+    if settings["experiments"] == ["list"] or settings["report_only"]:
+        return []
+    context = make_context(settings["scale"], settings["out"], settings["seeds"], settings["device"])
+    return select_parts(build_parts(settings["experiments"], context), settings["parts"])
+
+
+def run_experiments(
+    settings: dict[str, Any], parts: Sequence[Part], executor: Executor, command: str, progress: bool = True
+) -> int:
+    """``ebm-eval --experiment``: list the experiments, or run the parts, then write the results document.
+
+    :param settings: from ``eval.cli.resolve_experiment_settings``.
+    :param parts: from ``selected_parts``.
+    :param executor: runs the jobs.
+    :param command: the command line, recorded with every new run.
+    :param progress: show progress bars.
+    :return: 0 when nothing failed, else 1.
+    """
+    from eval.experiments import describe_experiments, make_context
+    from eval.results_doc import write_results
+
+    if settings["experiments"] == ["list"]:
+        print(describe_experiments(make_context(settings["scale"], settings["out"], settings["seeds"])))
+        return 0
+    summary = run_parts(parts, executor, command, progress=progress) if parts else RunSummary()
+    path = write_results(Path(settings["out"]), Path(settings["docs"]), scale=settings["scale"], seeds=settings["seeds"])
+    print(f"Results document: {path} (from {settings['out']}/)")
+    return 0 if summary.ok else 1
+
+
+__all__ = [
+    "RunSummary",
+    "figure_complete",
+    "figure_function",
+    "plan_jobs",
+    "run_experiments",
+    "run_parts",
+    "selected_parts",
+    "unique_jobs",
+]

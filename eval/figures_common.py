@@ -1,0 +1,351 @@
+"""What every paper-figure experiment shares: its result record, its budgets per scale, and small helpers.
+
+The experiments themselves live in ``eval/figures_*.py``; ``eval.figures`` gathers them in ``FIGURES``. Each one
+trains what it needs (seeded), measures, writes PNGs and a ``figure.json`` (a :class:`FigureResult`) under its
+output folder. Two scales: ``"paper"`` (the paper's budgets: 50k online transitions, 100k random transitions for
+pretraining) and ``"smoke"`` (tens of transitions and a tiny planner, so that tests run in seconds).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: experiments run headless
+
+import gymnasium as gym
+import numpy as np
+from matplotlib.figure import Figure
+
+import envs  # noqa: F401  registers the ebm/ ids
+from ebm_agent import EBMPlannerAgent, collect_random_transitions
+
+PAPER_SCORES: dict[str, dict[str, float]] = {
+    "obstacle_generalisation": {"ebm": -61.94, "action_ff": -81.24},
+}
+"""Numbers quoted in the paper, shown beside ours (labelled as the paper's), never used in a computation."""
+
+
+@dataclass
+class FigureResult:
+    """What one figure experiment produced.
+
+    :param name: the experiment's name, a key of ``eval.figures.FIGURES`` (e.g. ``"plan_diversity"``).
+    :param pngs: the PNG files written (under the output folder).
+    :param metrics: the numbers behind the figure, JSON-serialisable.
+    :param table_md: a markdown table for docs/results.md, or None.
+    :param command: the command that reproduces it.
+    """
+
+    name: str
+    pngs: list[Path]
+    metrics: dict[str, Any]
+    table_md: str | None
+    command: str
+
+    def save(self, out_dir: Path) -> Path:
+        """Write ``out_dir/figure.json``; PNG paths under ``out_dir`` are stored relative to it.
+
+        :param out_dir: the experiment's folder.
+        :return: the JSON file.
+        """
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        pngs = [_relative_to(Path(png), out_dir) for png in self.pngs]
+        record = {
+            "name": self.name,
+            "pngs": pngs,
+            "metrics": to_jsonable(self.metrics),
+            "table_md": self.table_md,
+            "command": self.command,
+        }
+        path = out_dir / "figure.json"
+        path.write_text(json.dumps(record, indent=2, allow_nan=False) + "\n")
+        return path
+
+    @classmethod
+    def load(cls, path: Path) -> FigureResult:
+        """Read a ``figure.json`` written by :meth:`save`; relative PNG paths are resolved against its folder.
+
+        :param path: the JSON file.
+        :return: the result.
+        """
+        path = Path(path)
+        record = json.loads(path.read_text())
+        missing = {"name", "pngs", "metrics", "table_md", "command"} - set(record)
+        if missing:
+            raise ValueError(f"{path} is not a figure.json: missing keys {sorted(missing)}")
+        pngs = [Path(p) if Path(p).is_absolute() else path.parent / p for p in record["pngs"]]
+        return cls(record["name"], pngs, record["metrics"], record["table_md"], record["command"])
+
+
+@dataclass(frozen=True)
+class FigureBudget:
+    """How much each figure experiment trains and samples.
+
+    :param online_timesteps: online transitions of each trained agent (the paper's 50,000).
+    :param pretrain_transitions: random transitions of a pretraining dataset (the paper's 100,000).
+    :param pretrain_epochs: passes over it (10 as the original).
+    :param eval_episodes: deterministic evaluation episodes per trained seed.
+    :param maze_timesteps: transitions of each maze exploration run (EBM and random alike).
+    :param sawyer_ebm_timesteps: transitions of each EBM Sawyer exploration run.
+    :param sawyer_random_timesteps: transitions of each random Sawyer exploration run (the paper: random needs over
+        200,000 to reach maximum occupancy).
+    :param curve_points: checkpoints of the exploration curves.
+    :param energy_snapshots: energy maps taken during training.
+    :param energy_resolution: cells per axis of a drawn energy map (the original: 300).
+    :param plan_samples: plans drawn per configuration in the planning figures.
+    :param diversity_horizons: the planning horizons compared by ``plan_diversity``.
+    :param reacher_horizon: planning horizon of ``reacher_directions`` (a half turn takes more than 10 steps).
+    :param planner: ``MPPIConfig`` fields overriding the EBM planner's defaults (empty: the defaults).
+    :param ff_planner: ``ActionPlannerConfig`` fields overriding the Action FF planner's defaults.
+    """
+
+    online_timesteps: int
+    pretrain_transitions: int
+    pretrain_epochs: int
+    eval_episodes: int
+    maze_timesteps: int
+    sawyer_ebm_timesteps: int
+    sawyer_random_timesteps: int
+    curve_points: int
+    energy_snapshots: int
+    energy_resolution: int
+    plan_samples: int
+    diversity_horizons: tuple[int, ...]
+    reacher_horizon: int
+    planner: dict[str, Any] = field(default_factory=dict)
+    ff_planner: dict[str, Any] = field(default_factory=dict)
+
+
+SCALES: dict[str, FigureBudget] = {
+    "paper": FigureBudget(
+        online_timesteps=50_000,
+        pretrain_transitions=100_000,
+        pretrain_epochs=10,
+        eval_episodes=10,
+        maze_timesteps=50_000,
+        sawyer_ebm_timesteps=50_000,
+        sawyer_random_timesteps=250_000,
+        curve_points=20,
+        energy_snapshots=4,
+        energy_resolution=300,
+        plan_samples=64,
+        diversity_horizons=(10, 20, 40),
+        reacher_horizon=20,
+    ),
+    "smoke": FigureBudget(
+        online_timesteps=48,
+        pretrain_transitions=256,
+        pretrain_epochs=1,
+        eval_episodes=1,
+        maze_timesteps=64,
+        sawyer_ebm_timesteps=16,
+        sawyer_random_timesteps=128,
+        curve_points=4,
+        energy_snapshots=2,
+        energy_resolution=24,
+        plan_samples=8,
+        diversity_horizons=(10, 20),
+        reacher_horizon=12,
+        planner={"iterations": 3, "num_samples": 12},
+        ff_planner={"iterations": 3, "num_samples": 12},
+    ),
+}
+"""Budgets by scale: ``"paper"`` reproduces the paper's, ``"smoke"`` runs in seconds."""
+
+
+def budget_for(scale: str) -> FigureBudget:
+    """The budget of a scale.
+
+    :param scale: a key of ``SCALES``.
+    :return: its budget.
+    """
+    if scale not in SCALES:
+        raise ValueError(f"unknown scale {scale!r}; choose one of {sorted(SCALES)}")
+    return SCALES[scale]
+
+
+def check_seeds(seeds: Sequence[int]) -> list[int]:
+    """Validate the training seeds of an experiment.
+
+    :param seeds: one or more distinct ints.
+    :return: them as a list.
+    """
+    values = list(seeds)
+    if not values or not all(isinstance(s, (int, np.integer)) and not isinstance(s, bool) for s in values):
+        raise ValueError(f"seeds must be a non-empty sequence of ints, got {seeds!r}")
+    if len(set(values)) != len(values):
+        raise ValueError(f"seeds must be distinct, got {values}")
+    return [int(s) for s in values]
+
+
+EXPERIMENT_NAMES: dict[str, str] = {"obstacle_generalisation": "obstacle"}
+"""Figure name -> its ``ebm-eval --experiment`` name where they differ (eval/experiments.py)."""
+
+
+def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
+    """The ``ebm-eval`` command line that reruns one figure experiment.
+
+    :param name: the figure (a key of ``eval.figures.FIGURES``).
+    :param scale: its scale.
+    :param seeds: its seeds.
+    :return: the command.
+    """
+    experiment = EXPERIMENT_NAMES.get(name, name)
+    command = f"ebm-eval --experiment {experiment} --seeds {' '.join(str(s) for s in seeds)}"
+    return command if scale == "paper" else f"{command} --scale {scale}"
+
+
+def build_ebm(env: gym.Env, seed: int, budget: FigureBudget, **kwargs: Any) -> EBMPlannerAgent:
+    """An EBM agent with the budget's planner settings and no TensorBoard images.
+
+    :param env: its env.
+    :param seed: its seed.
+    :param budget: the scale's budget.
+    :param kwargs: further ``EBMPlannerAgent`` arguments (e.g. ``cost``).
+    :return: the untrained agent.
+    """
+    planner = {**budget.planner, **kwargs.pop("planner_config", {})} or None
+    return EBMPlannerAgent("MultiInputPolicy", env, seed=seed, image_log_interval=0, planner_config=planner, **kwargs)
+
+
+def pretrained_ebm(env_id: str, seed: int, budget: FigureBudget, **kwargs: Any) -> EBMPlannerAgent:
+    """An EBM pretrained on random transitions of the env (the paper's "pretrained" setting).
+
+    :param env_id: registered id.
+    :param seed: seed of the agent and of the dataset.
+    :param budget: the scale's budget (dataset size and epochs).
+    :param kwargs: further ``EBMPlannerAgent`` arguments.
+    :return: the trained agent.
+    """
+    dataset = collect_random_transitions(env_id, num_transitions=budget.pretrain_transitions, seed=seed)
+    agent = build_ebm(gym.make(env_id), seed, budget, **kwargs)
+    agent.learn_offline(dataset, epochs=budget.pretrain_epochs, log_interval=0)
+    return agent
+
+
+def run_episode(agent: Any, env: gym.Env, seed: int) -> tuple[float, np.ndarray, bool]:
+    """One deterministic episode, as SB3's ``evaluate_policy`` plays it (plan carried in ``state``).
+
+    :param agent: anything with SB3's ``predict``.
+    :param env: the env (with its ``TimeLimit``).
+    :param seed: seed of ``reset``.
+    :return: (score: the undiscounted sum of rewards, achieved goals visited [L+1, G], success at the end).
+    """
+    observation, _ = env.reset(seed=seed)
+    positions = [np.asarray(observation["achieved_goal"], dtype=np.float64)]
+    state, episode_start = None, np.ones(1, dtype=bool)
+    score, done = 0.0, False
+    info: dict[str, Any] = {}
+    while not done:
+        action, state = agent.predict(observation, state=state, episode_start=episode_start, deterministic=True)
+        episode_start = np.zeros(1, dtype=bool)
+        observation, reward, terminated, truncated, info = env.step(action)
+        positions.append(np.asarray(observation["achieved_goal"], dtype=np.float64))
+        score += float(reward)
+        done = bool(terminated or truncated)
+    return score, np.stack(positions), bool(info.get("is_success", False))
+
+
+def summary(values: Sequence[float] | np.ndarray) -> dict[str, float]:
+    """Mean and population std (the harness's convention) of some numbers.
+
+    :param values: the numbers.
+    :return: ``{"mean": ..., "std": ...}``.
+    """
+    array = np.asarray(values, dtype=np.float64)
+    return {"mean": float(array.mean()), "std": float(array.std())}
+
+
+def save_png(figure: Figure, path: Path) -> Path:
+    """Write a figure to a PNG and close it.
+
+    :param figure: the figure.
+    :param path: the file.
+    :return: ``path``.
+    """
+    import matplotlib.pyplot as plt
+
+    try:
+        if figure.get_layout_engine() is None:
+            figure.tight_layout()
+        figure.savefig(path, dpi=120)
+    finally:
+        plt.close(figure)
+    return path
+
+
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """A markdown table; floats get 2 decimals, None becomes an em dash.
+
+    :param header: column titles.
+    :param rows: the cells.
+    :return: the table.
+    """
+
+    def cell(value: Any) -> str:
+        if value is None:
+            return "—"
+        if isinstance(value, float):
+            return f"{value:.2f}"
+        return str(value)
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def to_jsonable(value: Any) -> Any:
+    """Turn numpy scalars/arrays, tuples and paths into JSON types, and NaN/inf into None.
+
+    :param value: a nested structure of dicts, lists and numbers.
+    :return: the same structure with JSON types only.
+    """
+    if isinstance(value, dict):
+        return {str(k): to_jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [to_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return to_jsonable(value.tolist())
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    if isinstance(value, (int, np.integer)):
+        return int(value)
+    if isinstance(value, (float, np.floating)):
+        return float(value) if math.isfinite(float(value)) else None
+    if isinstance(value, Path):
+        return str(value)
+    return value
+
+
+def _relative_to(path: Path, folder: Path) -> str:
+    try:
+        return str(path.relative_to(folder))
+    except ValueError:
+        return str(path)
+
+
+__all__ = [
+    "EXPERIMENT_NAMES",
+    "PAPER_SCORES",
+    "SCALES",
+    "FigureBudget",
+    "FigureResult",
+    "budget_for",
+    "build_ebm",
+    "check_seeds",
+    "markdown_table",
+    "pretrained_ebm",
+    "reproduce_command",
+    "run_episode",
+    "save_png",
+    "summary",
+    "to_jsonable",
+]

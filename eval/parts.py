@@ -1,0 +1,402 @@
+"""The units of the reproduction: scales (budgets), cells (one table number over seeds), parts (what runs, resumes
+and is reported on its own) and experiments, with a rough cost estimate of each part.
+
+``eval.experiments`` builds the paper's experiments from these; ``eval.experiment_runner`` runs parts and
+``eval.results_doc`` reports them.
+"""
+
+from __future__ import annotations
+
+import math
+import shlex
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from envs import ENV_IDS, PAPER_EVAL_KWARGS
+from eval.jobs import Job
+
+AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
+"""How agents are named in tables."""
+
+
+@dataclass(frozen=True)
+class Scale:
+    """Budgets of one scale.
+
+    :param name: ``paper`` or ``smoke``.
+    :param online: transitions of an online run.
+    :param pretrain: transitions of a pretraining dataset.
+    :param eval_episodes: deterministic episodes per evaluation.
+    :param evaluations: evaluations per online run (points of its learning curve, the last at the budget).
+    :param seeds: default training seeds.
+    :param figure_seeds: default seeds of a figure, by figure (others: ``seeds``).
+    :param env_kwargs: added to every env's kwargs (smoke: short episodes).
+    :param hyperparams: agent name -> keyword arguments added to every run of that agent (smoke: tiny planners).
+    :param offline_kwargs: ``learn_offline`` settings of pretrained runs (empty: ``eval.pretraining``'s defaults).
+    :param sequential_kwargs: the same for the sequential dataset.
+    :param folder: subfolder of the output folder holding this scale's runs ("" for the paper's scale), so a smoke
+        run never replaces a paper run.
+    """
+
+    name: str
+    online: int
+    pretrain: int
+    eval_episodes: int
+    evaluations: int
+    seeds: tuple[int, ...]
+    figure_seeds: dict[str, tuple[int, ...]] = field(default_factory=dict)
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    hyperparams: dict[str, dict[str, Any]] = field(default_factory=dict)
+    offline_kwargs: dict[str, Any] = field(default_factory=dict)
+    sequential_kwargs: dict[str, Any] = field(default_factory=dict)
+    folder: str = ""
+
+
+_TINY_PLANNER = {"planner_config": {"iterations": 2, "num_samples": 8}}
+
+SCALES: dict[str, Scale] = {
+    "paper": Scale(
+        name="paper",
+        online=50_000,
+        pretrain=100_000,
+        eval_episodes=10,
+        evaluations=5,
+        seeds=(0, 1, 2),
+        figure_seeds={"sawyer_exploration": (0, 1, 2, 3)},  # "across 4 different seeds" (paper Fig. 8)
+    ),
+    "smoke": Scale(
+        name="smoke",
+        online=40,
+        pretrain=40,
+        eval_episodes=1,
+        evaluations=2,
+        seeds=(0,),
+        env_kwargs={"max_episode_steps": 10},
+        hyperparams={"ebm": _TINY_PLANNER, "action-ff": _TINY_PLANNER, "ppo": {"n_envs": 1, "n_steps": 20, "batch_size": 10}},
+        offline_kwargs={"epochs": 1, "batch_size": 16},
+        sequential_kwargs={"epochs": 1, "batch_size": 16, "repeat": 3},
+        folder="smoke",
+    ),
+}
+"""The scales ``--scale`` accepts."""
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One number of a table: the runs of one configuration over seeds, and the paper's number beside it.
+
+    :param setting: the row's label (``pretrained``, ``online``, ``PPO 5x``, ``RLS`` ...).
+    :param env: env short name.
+    :param agent: agent name (a key of ``eval.registry.AGENTS``).
+    :param jobs: one job per seed.
+    :param paper: the paper's number, None where it gives none.
+    :param paper_note: what the paper says instead of (or beside) a number.
+    :param evaluation: the name of an extra evaluation (``Job.extra_evaluations``) whose score stands for the cell,
+        None for the run's main evaluation.
+    """
+
+    setting: str
+    env: str
+    agent: str
+    jobs: tuple[Job, ...]
+    paper: float | None = None
+    paper_note: str = ""
+    evaluation: str | None = None
+
+    @property
+    def label(self) -> str:
+        """The agent's name in tables."""
+        return AGENT_LABELS.get(self.agent, self.agent)
+
+
+@dataclass(frozen=True)
+class Part:
+    """A unit of work that runs, resumes and is reported on its own: table cells, or one figure.
+
+    :param name: ``<experiment>/<...>``, matched by ``--part`` globs.
+    :param experiment: the experiment's name.
+    :param scale: the scale it was built for.
+    :param out_dir: the results folder.
+    :param seeds: its training seeds.
+    :param cells: the table cells (empty for a figure part).
+    :param figure: the ``eval.figures`` function it calls, None for a table part.
+    :param paper: a figure part's paper numbers, label -> number.
+    """
+
+    name: str
+    experiment: str
+    scale: str
+    out_dir: str
+    seeds: tuple[int, ...]
+    cells: tuple[Cell, ...] = ()
+    figure: str | None = None
+    paper: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def jobs(self) -> list[Job]:
+        """Its jobs, each once (cells may share runs), in cell order."""
+        unique: dict[Path, Job] = {}
+        for cell in self.cells:
+            for job in cell.jobs:
+                unique.setdefault(job.run_dir, job)
+        return list(unique.values())
+
+    @property
+    def figure_dir(self) -> Path:
+        """``<out>[/<scale folder>]/figures/<figure>``: where a figure part writes."""
+        folder = SCALES[self.scale].folder
+        root = Path(self.out_dir) / folder if folder else Path(self.out_dir)
+        return root / "figures" / str(self.figure)
+
+    def command(self) -> str:
+        """The command that runs exactly this part into its results folder."""
+        argv = ["ebm-eval", "--experiment", self.experiment, "--part", self.name, "-f", self.out_dir]
+        if self.scale != "paper":
+            argv += ["--scale", self.scale]
+        if self.seeds != default_seeds(SCALES[self.scale], self.figure):
+            argv += ["--seeds", *map(str, self.seeds)]
+        return shlex.join(argv)
+
+
+@dataclass(frozen=True)
+class Context:
+    """What parts are built for.
+
+    :param scale: the budgets.
+    :param out_dir: the results folder.
+    :param seeds: training seeds (None: the scale's defaults).
+    :param device: torch device of the runs.
+    """
+
+    scale: Scale
+    out_dir: str
+    seeds: tuple[int, ...] | None = None
+    device: str = "auto"
+
+    def seeds_for(self, figure: str | None = None) -> tuple[int, ...]:
+        """The seeds of a table part (``figure`` None) or of a figure."""
+        return self.seeds if self.seeds is not None else default_seeds(self.scale, figure)
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """A named experiment of the paper.
+
+    :param name: its ``--experiment`` name.
+    :param title: a heading for the results document.
+    :param source: where it is in the paper.
+    :param description: what it measures and how, for the results document.
+    :param build: ``build(context) -> parts``.
+    """
+
+    name: str
+    title: str
+    source: str
+    description: str
+    build: Callable[[Context], list[Part]]
+
+
+def default_seeds(scale: Scale, figure: str | None = None) -> tuple[int, ...]:
+    """The scale's seeds of a table part or a figure.
+
+    :param scale: the scale.
+    :param figure: a figure name, or None.
+    :return: the seeds.
+    """
+    return scale.figure_seeds.get(figure, scale.seeds) if figure else scale.seeds
+
+
+@cache
+def preset_hyperparams(env: str) -> dict[str, dict[str, Any]]:
+    """Agent settings of an env: the ``hyperparams`` of its bundled online preset, if it has one.
+
+    :param env: env short name.
+    :return: agent name -> keyword arguments.
+    """
+    from eval.presets import PRESET_DIR, load_preset
+
+    path = PRESET_DIR / f"{env}_online.yaml"
+    return dict(load_preset(str(path)).get("hyperparams") or {}) if path.is_file() else {}
+
+
+def make_cell(
+    context: Context,
+    setting: str,
+    env: str,
+    agent: str,
+    variant: str,
+    paper: float | None = None,
+    *,
+    mode: str = "online",
+    dataset: str = "random",
+    budget_multiple: int = 1,
+    env_kwargs: dict[str, Any] | None = None,
+    hyperparams: dict[str, Any] | None = None,
+    extra_evaluations: dict[str, dict[str, Any]] | None = None,
+    evaluation: str | None = None,
+    paper_note: str = "",
+) -> Cell:
+    """A cell with one job per seed, at the context's scale.
+
+    :param context: scale, folder, seeds, device.
+    :param setting: the row label.
+    :param env: env short name.
+    :param agent: agent name.
+    :param variant: the configuration's folder name (runs of equal configurations must share it).
+    :param paper: the paper's number.
+    :param mode: ``online`` or ``pretrained``.
+    :param dataset: pretrained only: the dataset.
+    :param budget_multiple: online only: the budget as a multiple of the scale's online budget.
+    :param env_kwargs: kwargs of the training and evaluation envs, over the scale's.
+    :param hyperparams: agent keyword arguments, over the preset's and the scale's.
+    :param extra_evaluations: extra evaluations of every run.
+    :param evaluation: the extra evaluation whose score stands for the cell.
+    :param paper_note: text beside the paper's number.
+    :return: the cell.
+    """
+    scale = context.scale
+    env_id = ENV_IDS[env]
+    train_kwargs = {**scale.env_kwargs, **(env_kwargs or {})}
+    agent_kwargs = {
+        **preset_hyperparams(env).get(agent, {}),
+        **scale.hyperparams.get(agent, {}),
+        **(hyperparams or {}),
+    }
+    pretrained = mode == "pretrained"
+    budget = scale.pretrain if pretrained else scale.online * budget_multiple
+    offline = {}
+    collector: dict[str, Any] = {}
+    if pretrained:
+        offline = dict(scale.sequential_kwargs if dataset == "directed+sequential" else scale.offline_kwargs)
+        if dataset != "random":
+            collector = {**preset_hyperparams(env).get("ebm", {}), **scale.hyperparams.get("ebm", {})}
+    jobs = tuple(
+        Job(
+            env_id=env_id,
+            agent=agent,
+            seed=seed,
+            timesteps=budget,
+            eval_freq=budget if pretrained else max(budget // scale.evaluations, 1),
+            eval_episodes=scale.eval_episodes,
+            hyperparams=agent_kwargs,
+            env_kwargs=train_kwargs,
+            eval_env_kwargs={**PAPER_EVAL_KWARGS.get(env_id, {}), **train_kwargs},
+            device=context.device,
+            out_dir=context.out_dir,
+            mode=mode,
+            dataset=dataset,
+            offline_kwargs=offline,
+            dataset_kwargs=collector,
+            extra_evaluations=dict(extra_evaluations or {}),
+            variant=str(Path(scale.folder) / variant) if scale.folder else variant,
+        )
+        for seed in context.seeds_for()
+    )
+    return Cell(setting, env, agent, jobs, paper, paper_note, evaluation)
+
+
+def table_part(context: Context, experiment: str, name: str, cells: Sequence[Cell]) -> Part:
+    """A part made of table cells."""
+    return Part(name, experiment, context.scale.name, context.out_dir, context.seeds_for(), tuple(cells))
+
+
+def figure_part(context: Context, experiment: str, name: str, figure: str, paper: dict[str, float] | None = None) -> Part:
+    """A part that calls one ``eval.figures`` function."""
+    seeds = context.seeds_for(figure)
+    return Part(name, experiment, context.scale.name, context.out_dir, seeds, figure=figure, paper=dict(paper or {}))
+
+
+SECONDS_PER_STEP = {"particle": 0.008, "maze": 0.008, "reacher": 0.01, "sawyer": 0.03}
+"""Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting: docs/benchmarks.md
+measured 123 transitions/s for the EBM on the particle (1 process, 2 threads); the others are scaled guesses."""
+
+PPO_SECONDS_PER_STEP = 0.001
+"""Rough CPU seconds per PPO transition (docs/benchmarks.md: about 2,000 transitions/s on the particle)."""
+
+SECONDS_PER_OFFLINE_UPDATE = {"ebm": 0.02, "action-ff": 0.003}
+"""Rough CPU seconds per ``learn_offline`` minibatch of 256."""
+
+FIGURE_SECONDS_PER_SEED = {
+    "obstacle_generalisation": 900.0,
+    "plan_diversity": 500.0,
+    "reacher_directions": 600.0,
+    "maze_exploration": 500.0,
+    "sawyer_exploration": 1800.0,
+    "energy_maps": 900.0,
+}
+"""Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents)."""
+
+
+def _episode_length(job: Job) -> int:
+    import gymnasium as gym
+
+    steps = job.env_kwargs.get("max_episode_steps")
+    if steps is None:
+        spec = gym.spec(job.env_id)
+        steps = spec.max_episode_steps if spec is not None else 1000
+    return int(steps or 1000)
+
+
+def estimate_job_seconds(job: Job) -> float:
+    """A rough CPU-seconds estimate of one job (learning, its directed dataset if any, evaluations).
+
+    :param job: the job.
+    :return: seconds.
+    """
+    per_step = PPO_SECONDS_PER_STEP if job.agent == "ppo" else SECONDS_PER_STEP.get(job.env_short, 0.01)
+    act = 0.0001 if job.agent == "ppo" else per_step
+    episode = _episode_length(job)
+    extra = 1 + len(job.extra_evaluations)
+    if job.mode == "online":
+        evaluations = max(job.timesteps // max(job.eval_freq, 1), 1)
+        return job.timesteps * per_step + (evaluations + extra - 1) * job.eval_episodes * episode * act
+    sequential = job.dataset == "directed+sequential"
+    epochs = job.offline_kwargs.get("epochs", 1 if sequential else 10)
+    repeat = job.offline_kwargs.get("repeat", 100) if sequential else 1
+    batch = job.offline_kwargs.get("batch_size", 256)
+    updates = epochs * math.ceil(job.timesteps * repeat / batch)
+    collect = 0.0 if job.dataset == "random" else job.timesteps * SECONDS_PER_STEP.get(job.env_short, 0.01) / 2
+    return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + collect + extra * job.eval_episodes * episode * act
+
+
+def estimate_part_seconds(part: Part) -> float:
+    """A rough CPU-seconds estimate of a part (one process; ``--jobs N`` divides the wall time).
+
+    :param part: the part.
+    :return: seconds.
+    """
+    if part.figure is not None:
+        factor = 1.0 if part.scale == "paper" else 0.01
+        return FIGURE_SECONDS_PER_SEED.get(part.figure, 600.0) * len(part.seeds) * factor
+    return sum(estimate_job_seconds(job) for job in part.jobs)
+
+
+def format_duration(seconds: float) -> str:
+    """``45 s``, ``12 min``, ``3.4 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+__all__ = [
+    "AGENT_LABELS",
+    "SCALES",
+    "Cell",
+    "Context",
+    "Experiment",
+    "Part",
+    "Scale",
+    "default_seeds",
+    "estimate_job_seconds",
+    "estimate_part_seconds",
+    "figure_part",
+    "format_duration",
+    "make_cell",
+    "preset_hyperparams",
+    "table_part",
+]

@@ -1,0 +1,277 @@
+"""The datasets and the offline training of pretrained jobs (the paper's "pretrained" rows, Tables 1 and 2).
+
+Datasets (paper Sec. 4.1-4.2; reference/original_code.md §2, §6):
+
+- ``random``: ``timesteps`` transitions of the training env driven by its exploration actions
+  (``ebm_agent.datasets.collect_random_transitions``: the env's ``sample_exploration_action()`` where it has one,
+  e.g. the Sawyer's random joint targets, else uniform actions). The paper: "100,000 action-state transitions
+  pre-generated from random sampling in each environment".
+- ``directed``: the real transitions an EBM agent experiences while it learns online on the same env for
+  ``timesteps`` transitions, in the order it experienced them. The paper: "a directed dataset of 100,000 frames
+  from an EBM trained on Sawyer Arm task"; the original code saved the first 120,000 entries of the online EBM's
+  positive replay buffer. The collecting agent is ``EBMPlannerAgent`` with ``Job.dataset_kwargs`` and the job's
+  seed, so the EBM and Action FF jobs of one seed learn from the same dataset.
+- ``directed+sequential``: the directed dataset with every transition repeated ``repeat`` (100) times in a row,
+  learnt in contiguous minibatches (``learn_offline(sequential=True)``). The paper: "batches sequentially sampled
+  from the dataset, with each datapoint repeated 100 times without shuffling to mimic the correlated experiences
+  seen during online training". The paper gives no epoch count for it; the default is one pass over the repeated
+  data, i.e. every transition is seen 100 times (the shuffled datasets: 10 epochs, 10 times), because the original's
+  10 epochs over the repeated data would cost 100x the gradient steps of the other rows.
+
+Datasets are cached under ``<out>/datasets/<env>/`` (a file lock keeps parallel jobs of one seed from collecting the
+same directed dataset twice); a cache file is named by a hash of everything that determines its content.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+from collections.abc import Iterator
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import gymnasium as gym
+import numpy as np
+
+from ebm_agent.datasets import TransitionDataset, collect_random_transitions
+from eval.jobs import Job, to_plain
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+OFFLINE_DEFAULTS: dict[str, int] = {"epochs": 10, "batch_size": 256}
+"""``learn_offline`` settings of the shuffled datasets: the original's 10 epochs of batches of 256."""
+
+SEQUENTIAL_DEFAULTS: dict[str, int] = {"epochs": 1, "batch_size": 256, "repeat": 100}
+"""The sequential ablation: each transition 100 times in a row (the paper), one pass over the repeated data."""
+
+
+def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
+    """Build (or load) the job's dataset and train ``model`` on it with ``learn_offline``.
+
+    :param model: an untrained agent with ``learn_offline`` (the EBM agent, Action FF).
+    :param job: a job with ``mode="pretrained"``; ``timesteps`` is the dataset size.
+    :return: what was done, for ``metrics.json``: dataset, its size and file, epochs, batch size, repeat, gradient
+        steps.
+    :raises TypeError: for an agent that cannot learn offline.
+    :raises ValueError: for unknown ``offline_kwargs``.
+    """
+    learn_offline = getattr(model, "learn_offline", None)
+    if not callable(learn_offline):
+        raise TypeError(
+            f"agent {job.agent!r} ({type(model).__name__}) has no learn_offline, so it cannot be pretrained; "
+            "pretrained jobs need the EBM agent or Action FF"
+        )
+    sequential = job.dataset == "directed+sequential"
+    defaults = SEQUENTIAL_DEFAULTS if sequential else OFFLINE_DEFAULTS
+    unknown = sorted(set(job.offline_kwargs) - set(defaults))
+    if unknown:
+        raise ValueError(f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r}; known: {sorted(defaults)}")
+    settings = {**defaults, **job.offline_kwargs}
+    base, path = load_or_build_dataset(job)
+    repeat = int(settings.get("repeat", 1))
+    data = repeat_transitions(base, repeat) if repeat > 1 else base
+    updates_before = int(getattr(model, "_n_updates", 0))
+    learn_offline(
+        data,
+        epochs=int(settings["epochs"]),
+        batch_size=int(settings["batch_size"]),
+        sequential=sequential,
+        tb_log_name=job.tb_log_name,
+    )
+    return {
+        "dataset": job.dataset,
+        "dataset_size": len(base),
+        "dataset_file": str(path),
+        "dataset_info": base.info,
+        "epochs": int(settings["epochs"]),
+        "batch_size": int(settings["batch_size"]),
+        "repeat": repeat,
+        "sequential": sequential,
+        "gradient_steps": int(getattr(model, "_n_updates", 0)) - updates_before,
+    }
+
+
+def dataset_path(job: Job) -> Path:
+    """The cache file of the job's base dataset (the directed one for ``directed+sequential``).
+
+    :param job: a pretrained job.
+    :return: ``<out>/datasets/<env>/<kind>_n<size>_s<seed>_<hash>.npz``.
+    """
+    kind = "random" if job.dataset == "random" else "directed"
+    key = {
+        "env_id": job.env_id,
+        "env_kwargs": job.env_kwargs,
+        "kind": kind,
+        "size": job.timesteps,
+        "seed": job.seed,
+        "collector": job.dataset_kwargs if kind == "directed" else {},
+    }
+    digest = hashlib.sha256(json.dumps(to_plain(key), sort_keys=True).encode()).hexdigest()[:10]
+    return Path(job.out_dir) / "datasets" / job.env_short / f"{kind}_n{job.timesteps}_s{job.seed}_{digest}.npz"
+
+
+def load_or_build_dataset(job: Job) -> tuple[TransitionDataset, Path]:
+    """The job's base dataset from the cache, collected first when missing.
+
+    :param job: a pretrained job.
+    :return: the dataset and its file.
+    """
+    path = dataset_path(job)
+    with _file_lock(path.with_suffix(".lock")):
+        if path.exists():
+            return TransitionDataset.load(path), path
+        if job.dataset == "random":
+            dataset = collect_random_transitions(job.env_id, job.timesteps, seed=job.seed, **job.env_kwargs)
+        else:
+            dataset = collect_directed_transitions(
+                job.env_id, job.env_kwargs, job.timesteps, job.seed, job.dataset_kwargs, job.device
+            )
+        dataset.info = to_plain({**dataset.info, "env_kwargs": job.env_kwargs})
+        dataset.save(path)
+    return dataset, path
+
+
+def collect_directed_transitions(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    num_transitions: int,
+    seed: int,
+    agent_kwargs: dict[str, Any] | None = None,
+    device: str = "auto",
+) -> TransitionDataset:
+    """The real transitions of an EBM agent learning online for ``num_transitions`` transitions, in order.
+
+    :param env_id: registered Gymnasium id.
+    :param env_kwargs: keyword arguments of ``gym.make``.
+    :param num_transitions: M, the transitions recorded (the agent's whole budget).
+    :param seed: seed of the agent and its env.
+    :param agent_kwargs: keyword arguments of ``EBMPlannerAgent``.
+    :param device: torch device of the agent.
+    :return: the dataset; ``info`` names the policy ``"directed"`` and the agent's settings.
+    """
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    import envs  # noqa: F401  registers the ebm/ ids
+    from ebm_agent import EBMPlannerAgent
+
+    recorder = TransitionRecorder(gym.make(env_id, **env_kwargs))
+    vec_env = DummyVecEnv([lambda: Monitor(recorder)])
+    agent = EBMPlannerAgent("MultiInputPolicy", vec_env, seed=seed, device=device, **(agent_kwargs or {}))
+    try:
+        agent.learn(total_timesteps=num_transitions)
+    finally:
+        vec_env.close()
+    info = {"env_id": env_id, "seed": seed, "policy": "directed", "agent": "EBMPlannerAgent", "agent_kwargs": agent_kwargs}
+    return recorder.dataset(info=to_plain(info))
+
+
+class TransitionRecorder(gym.Wrapper):
+    """Records every (s, a, s') the wrapped goal env steps through, with its episode index.
+
+    States are the ``"observation"`` entry of the Dict observation; an episode's last transition keeps its true
+    final state (the wrapper sees it before any auto-reset), and the next reset starts a new episode index.
+
+    :param env: the env to record.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self._states: list[np.ndarray] = []
+        self._next_states: list[np.ndarray] = []
+        self._actions: list[np.ndarray] = []
+        self._episode_ids: list[int] = []
+        self._state: np.ndarray | None = None
+        self._episode = -1
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        """Reset the env and start a new episode index."""
+        observation, info = self.env.reset(**kwargs)
+        self._state = _state_of(observation)
+        self._episode += 1
+        return observation, info
+
+    def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
+        """Step the env and record the transition."""
+        observation, reward, terminated, truncated, info = self.env.step(action)
+        next_state = _state_of(observation)
+        if self._state is not None:
+            self._states.append(self._state)
+            self._next_states.append(next_state)
+            self._actions.append(np.asarray(action, dtype=np.float32).reshape(-1))
+            self._episode_ids.append(self._episode)
+        self._state = next_state
+        return observation, reward, terminated, truncated, info
+
+    def __len__(self) -> int:
+        return len(self._states)
+
+    def dataset(self, info: dict[str, Any] | None = None) -> TransitionDataset:
+        """The recorded transitions.
+
+        :param info: metadata to store with them.
+        :return: states [M, D], next states [M, D], actions [M, A], episode ids [M].
+        """
+        if not self._states:
+            raise ValueError("TransitionRecorder recorded no transition: step the env first")
+        return TransitionDataset(
+            np.stack(self._states),
+            np.stack(self._next_states),
+            np.stack(self._actions),
+            np.asarray(self._episode_ids),
+            info=dict(info or {}),
+        )
+
+
+def repeat_transitions(dataset: TransitionDataset, repeat: int) -> TransitionDataset:
+    """Every transition ``repeat`` times in a row (the sequential ablation's correlated stream).
+
+    :param dataset: M transitions.
+    :param repeat: copies of each.
+    :return: M * repeat transitions, copies adjacent, in the dataset's order.
+    """
+    if repeat < 1:
+        raise ValueError(f"repeat must be a positive number of copies, got {repeat}")
+    return TransitionDataset(
+        np.repeat(dataset.states, repeat, axis=0),  # [M * repeat, D]
+        np.repeat(dataset.next_states, repeat, axis=0),
+        np.repeat(dataset.actions, repeat, axis=0),
+        np.repeat(dataset.episode_ids, repeat),
+        info={**dataset.info, "repeat": repeat},
+    )
+
+
+def _state_of(observation: Any) -> np.ndarray:
+    state = observation["observation"] if isinstance(observation, dict) else observation
+    return np.asarray(state, dtype=np.float32).reshape(-1).copy()
+
+
+@contextlib.contextmanager
+def _file_lock(path: Path) -> Iterator[None]:
+    """An exclusive lock on ``path`` across processes of this machine (none where ``fcntl`` is missing)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "a") as handle:
+        try:
+            import fcntl
+        except ImportError:  # not POSIX: parallel jobs may collect a dataset twice, the atomic save keeps it whole
+            yield
+            return
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+__all__ = [
+    "OFFLINE_DEFAULTS",
+    "SEQUENTIAL_DEFAULTS",
+    "TransitionRecorder",
+    "collect_directed_transitions",
+    "dataset_path",
+    "load_or_build_dataset",
+    "pretrain",
+    "repeat_transitions",
+]

@@ -1,0 +1,491 @@
+"""``docs/results.md`` from a results folder: every experiment's numbers beside the paper's, or "not run yet".
+
+    python -m eval.results_doc -f runs/results              # docs/results.md
+    ebm-eval --report-only -f runs/results                  # the same
+
+The document is built from the registry (``eval.experiments``) and the run folders only: a cell's number is
+read from the ``metrics.json`` of runs whose fingerprint matches the cell's configuration (seeds found on disk
+beyond the default ones are included), a figure from its ``figure.json``. A part without runs says "not run
+yet" with the command that runs it; nothing is ever filled in. Per table: mean ± std over seeds of the per-seed
+mean scores (10 deterministic episodes each at the paper's scale), the IQM with its 95% stratified-bootstrap
+interval from 3 seeds on (``eval.stats``), the paper's number, the anchors of the evaluation env
+(``eval.anchors``), and per part the command that produced it, the machine, the date and the wall time. Claims
+are judged from the numbers (``eval.claims``). Figures are copied to ``<docs>/figures/`` and linked.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import shutil
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from eval import stats
+from eval.anchors import EnvAnchors, compute_anchors
+from eval.claims import evaluate_claims, render_claims
+from eval.experiments import EXPERIMENTS, make_context
+from eval.jobs import Job, evaluation_env_kwargs, to_plain
+from eval.parts import SCALES, Cell, Part, format_duration
+from eval.provenance import describe_machine, job_fingerprint, read_metrics, read_provenance, read_sessions
+
+MIN_SEEDS_FOR_IQM = 3
+
+
+@dataclass
+class CellResult:
+    """The finished runs of one cell.
+
+    :param cell: the cell.
+    :param runs: (job, metrics) of each finished run, by seed.
+    """
+
+    cell: Cell
+    runs: list[tuple[Job, dict[str, Any]]] = field(default_factory=list)
+
+    @property
+    def scores(self) -> np.ndarray:
+        """[seeds] the per-seed mean score of the cell's evaluation."""
+        return np.array([score_of(metrics, self.cell.evaluation) for _, metrics in self.runs], dtype=np.float64)
+
+    @property
+    def missing_seeds(self) -> list[int]:
+        """The cell's seeds without a finished run."""
+        done = {job.seed for job, _ in self.runs}
+        return [job.seed for job in self.cell.jobs if job.seed not in done]
+
+
+def score_of(metrics: dict[str, Any], evaluation: str | None) -> float:
+    """A run's mean score: its final evaluation's, or an extra evaluation's.
+
+    :param metrics: the run's ``metrics.json``.
+    :param evaluation: the extra evaluation's name, or None.
+    :return: the mean over episodes.
+    """
+    if evaluation is None:
+        return float(metrics["score_mean"])
+    return float(metrics["extra_evaluations"][evaluation]["score_mean"])
+
+
+def collect_cell(cell: Cell) -> CellResult:
+    """Read a cell's finished runs: its seeds, and any other seed found in its folder with the same configuration.
+
+    :param cell: the cell.
+    :return: its finished runs, by seed.
+    """
+    jobs = {job.seed: job for job in cell.jobs}
+    template = cell.jobs[0]
+    folder = template.run_dir.parent
+    if folder.is_dir():
+        for seed_dir in folder.glob("seed_*"):
+            suffix = seed_dir.name.removeprefix("seed_")
+            if suffix.isdigit() and int(suffix) not in jobs:
+                jobs[int(suffix)] = replace(template, seed=int(suffix))
+    result = CellResult(cell)
+    for seed in sorted(jobs):
+        job = jobs[seed]
+        metrics = read_metrics(job.run_dir)
+        if metrics is None or metrics.get("fingerprint") != job_fingerprint(job):
+            continue
+        if not (job.run_dir / "evaluations.npz").exists():
+            continue
+        if cell.evaluation is not None and cell.evaluation not in (metrics.get("extra_evaluations") or {}):
+            continue
+        result.runs.append((job, metrics))
+    return result
+
+
+def _pm(values: np.ndarray) -> str:
+    return f"{stats.mean(values):.2f} ± {stats.std(values):.2f}"
+
+
+def _iqm(values: np.ndarray) -> str:
+    if len(values) < MIN_SEEDS_FOR_IQM:
+        return "-"
+    low, high = stats.bootstrap_ci(values, stats.iqm)
+    return f"{stats.iqm(values):.2f} [{low:.2f}, {high:.2f}]"
+
+
+def _paper(cell: Cell) -> str:
+    text = "-" if cell.paper is None else f"{cell.paper:g}"
+    return f"{text} ({cell.paper_note})" if cell.paper_note else text
+
+
+def cells_table(results: Sequence[CellResult]) -> str:
+    """The markdown table of a part's (or an experiment's) cells.
+
+    :param results: the cells' results.
+    :return: one row per cell: ours, seeds, IQM [95% CI], success, paper.
+    """
+    lines = [
+        "| setting | env | agent | ours: mean ± std over seeds | seeds | IQM [95% CI] | success | paper |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for result in results:
+        cell, scores = result.cell, result.scores
+        ours = _pm(scores) if len(scores) else "not run yet"
+        seeds = f"{len(scores)}/{len(cell.jobs)}" if len(scores) < len(cell.jobs) else str(len(scores))
+        successes = [float(m["success_rate"]) for _, m in result.runs if m.get("success_rate") is not None]
+        successes = successes if cell.evaluation is None else []
+        success = f"{np.mean(successes):.2f}" if successes else "-"
+        lines.append(
+            f"| {cell.setting} | {cell.env} | {cell.label} | {ours} | {seeds} | {_iqm(scores)} | {success} | {_paper(cell)} |"
+        )
+    return "\n".join(lines)
+
+
+@dataclass
+class PartStatus:
+    """How far a part got, and where its numbers came from.
+
+    :param done: finished runs (or 1 for a finished figure).
+    :param total: runs it needs (or 1 for a figure).
+    :param commands: the commands that produced its runs.
+    :param machines: the machines they ran on.
+    :param finished: dates its runs finished.
+    :param wall_time_s: summed wall time of its runs (or the figure's).
+    """
+
+    done: int = 0
+    total: int = 0
+    commands: list[str] = field(default_factory=list)
+    machines: list[str] = field(default_factory=list)
+    finished: list[str] = field(default_factory=list)
+    wall_time_s: float = 0.0
+
+
+def part_status(part: Part, results: Sequence[CellResult]) -> PartStatus:
+    """The status of a table part from its cells' runs, or of a figure part from its folder.
+
+    :param part: the part.
+    :param results: its cells' results (ignored for a figure part).
+    :return: the status.
+    """
+    status = PartStatus()
+    if part.figure is not None:
+        from eval.experiment_runner import figure_complete
+
+        record = read_provenance(part.figure_dir) or {}
+        status.total, status.done = 1, int(figure_complete(part))
+        if status.done:
+            status.commands = [str(record.get("command", "unknown"))]
+            status.machines = [describe_machine(record.get("machine"))]
+            status.finished = [str(record.get("date", ""))]
+            status.wall_time_s = float(record.get("wall_time_s", 0.0))
+        return status
+    runs: dict[Path, tuple[Job, dict[str, Any]]] = {}
+    for result in results:
+        runs.update((job.run_dir, (job, metrics)) for job, metrics in result.runs)
+    status.total, status.done = len(part.jobs), sum(1 for job in part.jobs if job.run_dir in runs)
+    for job, metrics in runs.values():
+        record = read_provenance(job.run_dir) or {}
+        status.commands.append(str(record.get("command", "unknown")))
+        status.machines.append(describe_machine(metrics.get("machine")))
+        status.finished.append(str(metrics.get("finished_at", "")))
+        status.wall_time_s += float(metrics.get("wall_time_s", 0.0))
+    return status
+
+
+def parts_table(parts: Sequence[Part], statuses: Sequence[PartStatus]) -> str:
+    """Per part: status, command(s), machine(s), finish dates, wall time.
+
+    :param parts: the parts.
+    :param statuses: their statuses.
+    :return: a markdown table.
+    """
+    lines = ["| part | status | command | machine | finished | wall time (sum of its runs) |", "|---|---|---|---|---|---|"]
+    for part, status in zip(parts, statuses):
+        if status.done == 0:
+            lines.append(f"| {part.name} | not run yet | `{part.command()}` | | | |")
+            continue
+        state = "complete" if status.done == status.total else f"partial ({status.done}/{status.total}); to finish:"
+        commands = sorted(set(status.commands)) if status.done == status.total else [part.command()]
+        dates = sorted(d[:10] for d in status.finished if d)
+        when = (dates[0] if dates[0] == dates[-1] else f"{dates[0]} to {dates[-1]}") if dates else "-"
+        lines.append(
+            f"| {part.name} | {state} | {'<br>'.join(f'`{c}`' for c in commands)} | "
+            f"{'<br>'.join(sorted(set(status.machines)))} | {when} | {format_duration(status.wall_time_s)} |"
+        )
+    return "\n".join(lines)
+
+
+def _anchor_key(job: Job, evaluation: dict[str, Any]) -> str:
+    return json.dumps(to_plain({"env_id": job.env_id, "kwargs": evaluation}), sort_keys=True)
+
+
+def anchors_rows(results: Sequence[CellResult], out_dir: Path) -> list[tuple[str, EnvAnchors | None]]:
+    """Anchors of the evaluation envs of cells that have runs (cached in ``<out>/anchors_cache.json``).
+
+    :param results: cells.
+    :param out_dir: the results folder.
+    :return: (label, anchors or None when they could not be computed), one per evaluation configuration.
+    """
+    cache_path = out_dir / "anchors_cache.json"
+    try:
+        cache = json.loads(cache_path.read_text())
+    except (OSError, ValueError):
+        cache = {}
+    rows, seen = [], set()
+    for result in results:
+        if not result.runs:
+            continue
+        job = result.cell.jobs[0]
+        kwargs = evaluation_env_kwargs(job)
+        if result.cell.evaluation is not None:
+            kwargs = {**kwargs, **job.extra_evaluations.get(result.cell.evaluation, {})}
+        key = _anchor_key(job, kwargs)
+        if key in seen:
+            continue
+        seen.add(key)
+        if key not in cache:
+            try:
+                cache[key] = asdict(compute_anchors(job.env_id, kwargs))
+            except Exception as error:  # context only: a failure must not cost the document
+                print(f"results_doc: no anchors for {job.env_id} {kwargs}: {error}", file=sys.stderr)
+                cache[key] = None
+        shown = {k: v for k, v in kwargs.items() if k != "max_episode_steps"}
+        label = result.cell.env + (f" ({', '.join(f'{k}={v}' for k, v in shown.items())})" if shown else "")
+        rows.append((label, None if cache[key] is None else EnvAnchors(**cache[key])))
+    cache_path.parent.mkdir(parents=True, exist_ok=True)
+    cache_path.write_text(json.dumps(cache, indent=2))
+    return rows
+
+
+def _anchors_md(rows: Sequence[tuple[str, EnvAnchors | None]]) -> str:
+    lines = ["| evaluation env | optimum | random policy | standing still |", "|---|---|---|---|"]
+    for label, anchor in rows:
+        if anchor is None:
+            lines.append(f"| {label} | - | - | - |")
+            continue
+        optimum = "-" if anchor.optimum is None else f"{anchor.optimum:.2f} ({anchor.optimum_source})"
+        random = f"{anchor.random_mean:.2f} ± {anchor.random_std:.2f} ({anchor.random_episodes} episodes)"
+        lines.append(f"| {label} | {optimum} | {random} | {anchor.still_score:.2f} |")
+    return "\n".join(lines)
+
+
+def learning_curves(part: Part, results: Sequence[CellResult], figures_dir: Path) -> Path | None:
+    """Learning curves of a part's online cells (mean over seeds, min-max band) as a PNG, if any has two points.
+
+    :param part: the part.
+    :param results: its cells' results.
+    :param figures_dir: where the PNG goes.
+    :return: the PNG, or None.
+    """
+    from eval.plots import load_curve, plot_curves
+
+    curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+    for result in results:
+        if result.cell.evaluation is not None:
+            continue
+        for job, _ in result.runs:
+            if job.mode != "online":
+                continue
+            curve = load_curve(job.run_dir / "evaluations.npz")
+            if len(curve[0]) >= 2:
+                curves.setdefault(f"{result.cell.label} ({result.cell.setting})", []).append(curve)
+    if not curves:
+        return None
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    path = figures_dir / f"{_safe(part.name)}_learning_curves.png"
+    return plot_curves(curves, path, f"{part.name}: score vs transitions")
+
+
+def _safe(name: str) -> str:
+    return name.replace("/", "_").replace("+", "_")
+
+
+def figure_section(part: Part, figures_dir: Path, docs_dir: Path) -> list[str]:
+    """A figure part's numbers and images (PNGs copied into ``figures_dir``), or "not run yet".
+
+    :param part: a figure part.
+    :param figures_dir: where PNGs are copied.
+    :param docs_dir: the document's folder (links are relative to it).
+    :return: markdown lines.
+    """
+    from eval.experiment_runner import figure_complete
+
+    lines = []
+    if part.paper:
+        lines += ["Paper: " + ", ".join(f"{label} {value:g}" for label, value in part.paper.items()) + ".", ""]
+    if not figure_complete(part):
+        return [*lines, f"Not run yet: `{part.command()}`"]
+    figure = json.loads((part.figure_dir / "figure.json").read_text())
+    if figure.get("table_md"):
+        lines += [str(figure["table_md"]).strip(), ""]
+    else:
+        lines += [f"- {key}: {_short(value)}" for key, value in (figure.get("metrics") or {}).items()] + [""]
+    for png in figure.get("pngs") or []:
+        source = _resolve_png(Path(png), part.figure_dir)
+        if source is None:
+            lines.append(f"(missing image {png})")
+            continue
+        figures_dir.mkdir(parents=True, exist_ok=True)
+        target = figures_dir / f"{_safe(part.name)}_{source.name}"
+        shutil.copyfile(source, target)
+        lines.append(f"![{part.figure}: {source.stem}]({target.relative_to(docs_dir).as_posix()})")
+    return lines
+
+
+def _resolve_png(path: Path, folder: Path) -> Path | None:
+    for candidate in (path, folder / path, folder / path.name):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def _short(value: Any) -> str:
+    array = np.asarray(value, dtype=object)
+    if array.ndim == 0:
+        return f"{value:.4g}" if isinstance(value, float) else str(value)
+    try:
+        numbers = np.asarray(value, dtype=np.float64)
+        return f"mean {numbers.mean():.4g} over {numbers.size} values"
+    except (TypeError, ValueError):
+        return json.dumps(to_plain(value))[:200]
+
+
+def render_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: Sequence[int] | None = None) -> str:
+    """The whole results document.
+
+    :param out_dir: the results folder.
+    :param docs_path: the document's path (figures go to ``<its folder>/figures/``).
+    :param scale: the scale whose runs are reported.
+    :param seeds: the default seeds expected per cell (None: the scale's); other finished seeds are included too.
+    :return: markdown.
+    """
+    context = make_context(scale, str(out_dir), seeds)
+    docs_dir = docs_path.parent
+    figures_dir = docs_dir / "figures"
+    regenerate = ["ebm-eval", "--report-only", "-f", str(out_dir)]
+    regenerate += ["--scale", scale] if scale != "paper" else []
+    regenerate += ["--seeds", *map(str, seeds)] if seeds else []
+    sections, by_key, figure_metrics = [], {}, {}
+    for experiment in EXPERIMENTS.values():
+        parts = experiment.build(context)
+        section = [f"## {experiment.title}", "", f"{experiment.description} ({experiment.source}.)", ""]
+        all_results, statuses, per_part = [], [], []
+        for part in parts:
+            results = [collect_cell(cell) for cell in part.cells]
+            for result in results:
+                by_key[(part.name, result.cell.agent, result.cell.setting)] = result.scores
+            all_results += results
+            per_part.append(results)
+            statuses.append(part_status(part, results))
+            if part.figure is not None:
+                section += [f"### {part.name}", "", *figure_section(part, figures_dir, docs_dir), ""]
+                if statuses[-1].done:
+                    figure_metrics[part.name] = json.loads((part.figure_dir / "figure.json").read_text()).get("metrics")
+        if all_results:
+            section += [cells_table(all_results), ""]
+            anchors = anchors_rows(all_results, out_dir)
+            if anchors:
+                section += ["Anchors of the evaluation envs:", "", _anchors_md(anchors), ""]
+            for part, results in zip(parts, per_part):
+                curve = learning_curves(part, results, figures_dir)
+                if curve is not None:
+                    section += [f"![{part.name} learning curves]({curve.relative_to(docs_dir).as_posix()})", ""]
+        section += ["Parts:", "", parts_table(parts, statuses), ""]
+        sections += section
+    claims = evaluate_claims(lambda key: list(by_key.get(key, [])), figure_metrics.get)
+    header = [
+        "# Reproduction results",
+        "",
+        f"Generated by `{shlex.join(regenerate)}` on {time.strftime('%Y-%m-%d %H:%M %Z')} from the run folders under "
+        f"`{out_dir}/` (scale `{scale}`). Every number is read from a finished run of the configuration its row "
+        "names; a part that has not run says so, with the command that runs it. `make results` runs everything "
+        "(`ebm-eval --experiment all -f runs/results`) and regenerates this file.",
+        "",
+        "Score: the undiscounted sum of the env's per-step rewards over one deterministic evaluation episode (the "
+        f"paper's metric), {SCALES[scale].eval_episodes} evaluation episode(s) per run; ± is the population std over "
+        "seeds of the per-seed mean scores; IQM [95% CI] (stratified bootstrap over seeds) from {MIN_SEEDS_FOR_IQM} seeds on. "
+        "The paper reports single numbers without seeds or spread.",
+        "",
+        "## Claims (judged from the numbers below)",
+        "",
+        render_claims(claims),
+        "",
+    ]
+    return "\n".join(header + sections + _sessions_md(out_dir)).rstrip() + "\n"
+
+
+def _sessions_md(out_dir: Path) -> list[str]:
+    sessions = read_sessions(out_dir)
+    if not sessions:
+        return []
+    lines = [
+        "## Sessions",
+        "",
+        "| started | command | machine | wall time | ran | skipped | failed |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for record in sessions:
+        lines.append(
+            f"| {str(record.get('started', ''))[:16]} | `{record.get('command', '')}` | "
+            f"{describe_machine(record.get('machine'))} | {format_duration(float(record.get('wall_time_s', 0.0)))} | "
+            f"{len(record.get('ran', []))} | {len(record.get('skipped', []))} | {len(record.get('failed', []))} |"
+        )
+    return [*lines, ""]
+
+
+def write_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: Sequence[int] | None = None) -> Path:
+    """Write the results document.
+
+    :param out_dir: the results folder.
+    :param docs_path: the document (its folder gets ``figures/``).
+    :param scale: the scale whose runs are reported.
+    :param seeds: the default seeds of each cell.
+    :return: ``docs_path``.
+    """
+    docs_path = Path(docs_path)
+    docs_path.parent.mkdir(parents=True, exist_ok=True)
+    text = render_results(Path(out_dir), docs_path, scale, seeds)
+    docs_path.write_text(text)
+    return docs_path
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m eval.results_doc``: regenerate the results document.
+
+    :param argv: the arguments.
+    :return: 0.
+    """
+    parser = argparse.ArgumentParser(
+        prog="python -m eval.results_doc",
+        description="Regenerate the results document (docs/results.md) from a results folder; nothing is trained.",
+    )
+    parser.add_argument("-f", "--out", default="runs/results", help="the results folder (default: runs/results)")
+    parser.add_argument("--scale", default="paper", choices=list(SCALES), help="the scale reported (default: paper)")
+    parser.add_argument("--seeds", nargs="+", type=int, help="default seeds of each cell (default: the scale's)")
+    parser.add_argument("--docs", help="the document (default: docs/results.md at the paper's scale, else <out>/results.md)")
+    args = parser.parse_args(argv)
+    docs = args.docs or ("docs/results.md" if args.scale == "paper" else str(Path(args.out) / "results.md"))
+    path = write_results(Path(args.out), Path(docs), args.scale, args.seeds)
+    print(f"Results document: {path}")
+    return 0
+
+
+__all__ = [
+    "CellResult",
+    "PartStatus",
+    "cells_table",
+    "collect_cell",
+    "figure_section",
+    "learning_curves",
+    "main",
+    "part_status",
+    "parts_table",
+    "render_results",
+    "score_of",
+    "write_results",
+]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

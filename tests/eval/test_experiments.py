@@ -1,0 +1,290 @@
+"""The experiment registry, pretrained jobs, resumable parts and `ebm-eval --experiment` (smoke budgets only)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eval.cli import main
+from eval.experiment_runner import figure_complete, run_parts, unique_jobs
+from eval.experiments import EXPERIMENTS, build_parts, make_context, select_parts
+from eval.jobs import Job, JobResult, run_job
+from eval.parts import SCALES, Part
+from eval.pretraining import dataset_path, repeat_transitions
+from eval.provenance import completed_result, job_fingerprint, read_provenance, read_sessions
+
+pytest.importorskip("envs.particle")
+
+RUN_FILES = {"config.yaml", "evaluations.npz", "metrics.json", "model.zip"}
+
+
+def paper_parts(tmp_path: Path, names=("all",)) -> list[Part]:
+    return build_parts(list(names), make_context("paper", str(tmp_path)))
+
+
+def test_every_experiment_builds_with_the_paper_budgets(tmp_path):
+    parts = paper_parts(tmp_path)
+    assert {part.experiment for part in parts} == set(EXPERIMENTS)
+    for job in unique_jobs(parts):  # also: no run folder gets two configurations
+        assert job.eval_episodes == 10 and job.seed in (0, 1, 2)
+        if job.mode == "pretrained":
+            assert job.timesteps == 100_000
+        elif job.agent != "ppo":
+            assert job.timesteps == 50_000
+    for part in parts:
+        assert part.seeds == ((0, 1, 2, 3) if part.figure == "sawyer_exploration" else (0, 1, 2))
+        for cell in part.cells:
+            assert len(cell.jobs) == 3
+
+
+def test_paper_numbers_sit_beside_the_cells(tmp_path):
+    cells = {(p.name, c.agent, c.setting): c for p in paper_parts(tmp_path) for c in p.cells}
+    assert len(cells) == sum(len(p.cells) for p in paper_parts(tmp_path))  # the keys the claims use are unique
+    assert cells[("table1/particle/pretrained", "ebm", "pretrained")].paper == -5.14
+    assert cells[("table1/maze/online", "action-ff", "online")].paper == -949.99
+    assert cells[("table1/reacher/online", "ebm", "online")].paper == -29.87
+    assert (
+        cells[("table2/sawyer/pretrained_directed_sequential", "action-ff", "pretrained directed + sequential")].paper
+        == -12838
+    )
+    assert cells[("table2/sawyer/online_variable", "ebm", "online variable")].paper == -3907
+    assert cells[("sawyer_ppo/1x", "ppo", "PPO 1x")].paper == -9300
+    assert cells[("inverse_dynamics/sawyer", "ebm", "ground truth")].paper == -3782
+    assert cells[("inverse_dynamics/sawyer", "ebm", "RLS")].paper == -4694
+    assert cells[("fixed_on_variable/sawyer", "ebm", "trained fixed, evaluated variable")].paper == -4547
+    from eval.claims import SCORE_CLAIMS
+
+    for claim in SCORE_CLAIMS:  # every claim names cells that exist
+        for _label, better, worse in claim.comparisons:
+            assert better in cells and worse in cells
+    obstacle = next(p for p in paper_parts(tmp_path, ["obstacle"]))
+    assert obstacle.paper == {"EBM": -61.94, "Action FF": -81.24}
+
+
+def test_cells_configure_their_runs(tmp_path):
+    parts = {p.name: p for p in paper_parts(tmp_path)}
+    particle = parts["table1/particle/online"].cells[0].jobs[0]
+    assert particle.eval_env_kwargs == {"start": (0.0, 0.0), "goal": (0.5, 0.5)} and particle.env_kwargs == {}
+    assert [c.jobs[0].timesteps for p in ("1x", "5x", "10x") for c in parts[f"sawyer_ppo/{p}"].cells] == [
+        50_000,
+        250_000,
+        500_000,
+    ]
+    datasets = [c.jobs[0].dataset for c in parts["table2/sawyer/pretrained_directed_sequential"].cells]
+    assert datasets == ["directed+sequential"] * 2
+    variable = parts["table2/sawyer/online_variable"].cells[0].jobs[0]
+    assert variable.env_kwargs == {"goal": "variable"} == variable.eval_env_kwargs
+    kinds = [c.jobs[0].hyperparams.get("inverse_dynamics") for c in parts["inverse_dynamics/particle"].cells]
+    assert kinds == [None, "mlp", "rls"]
+    # The fixed-on-variable evaluation reads the very runs of Table 2's online fixed-goal cells.
+    fixed = parts["table2/sawyer/online_fixed"].cells
+    on_variable = parts["fixed_on_variable/sawyer"].cells
+    assert [c.jobs for c in on_variable] == [c.jobs for c in fixed]
+    assert all(c.evaluation == "variable_goal" for c in on_variable)
+    assert fixed[0].jobs[0].extra_evaluations == {"variable_goal": {"goal": "variable"}}
+
+
+def test_part_globs_and_unknown_names(tmp_path):
+    parts = paper_parts(tmp_path)
+    assert [p.name for p in select_parts(parts, ["table1/particle/*"])] == [
+        "table1/particle/pretrained",
+        "table1/particle/online",
+    ]
+    sawyer = {p.name for p in select_parts(parts, ["*/sawyer*"])}
+    assert "table2/sawyer/online_fixed" in sawyer and "sawyer_exploration/sawyer" in sawyer
+    assert "table1/maze/online" not in sawyer
+    assert len(select_parts(parts, None)) == len(parts)
+    with pytest.raises(ValueError, match="matches no part"):
+        select_parts(parts, ["table9/*"])
+    with pytest.raises(ValueError, match="unknown experiment"):
+        build_parts(["table9"], make_context("paper", str(tmp_path)))
+    with pytest.raises(ValueError, match="unknown scale"):
+        make_context("huge", str(tmp_path))
+
+
+def test_smoke_runs_live_apart_from_paper_runs(tmp_path):
+    smoke = build_parts(["table1"], make_context("smoke", str(tmp_path)))
+    paper = paper_parts(tmp_path, ["table1"])
+    assert all(job.run_dir.relative_to(tmp_path).parts[0] == "smoke" for p in smoke for job in p.jobs)
+    assert not {j.run_dir for p in smoke for j in p.jobs} & {j.run_dir for p in paper for j in p.jobs}
+    assert SCALES["smoke"].online < 100 and smoke[0].command().endswith("--scale smoke")
+
+
+# ------------------------------------------------------------------------------------------------ pretrained jobs
+def _smoke_job(tmp_path: Path, **overrides) -> Job:
+    part = next(p for p in build_parts(["table1"], make_context("smoke", str(tmp_path))) if p.name.endswith("particle/online"))
+    return replace(part.cells[0].jobs[0], **overrides)
+
+
+def test_a_pretrained_job_writes_the_same_files_as_an_online_one(tmp_path):
+    online = run_job(_smoke_job(tmp_path))
+    pretrained_job = _smoke_job(tmp_path, mode="pretrained", variant="smoke/pretrained_random")
+    pretrained_job = replace(pretrained_job, offline_kwargs={"epochs": 1, "batch_size": 16})
+    pretrained = run_job(pretrained_job)
+    assert online.ok and pretrained.ok, (online.error, pretrained.error)
+    assert {p.name for p in pretrained.run_dir.iterdir()} >= RUN_FILES
+    assert {p.name for p in online.run_dir.iterdir()} >= RUN_FILES
+    metrics = json.loads((pretrained.run_dir / "metrics.json").read_text())
+    assert metrics["mode"] == "pretrained" and metrics["timesteps"] == pretrained_job.timesteps == 40
+    assert metrics["pretraining"]["dataset_size"] == 40 and metrics["pretraining"]["gradient_steps"] == 3
+    assert metrics["fingerprint"] == job_fingerprint(pretrained_job)
+    with np.load(pretrained.run_dir / "evaluations.npz") as data:
+        np.testing.assert_array_equal(data["timesteps"], [40])
+        np.testing.assert_allclose(data["results"][-1], pretrained.episode_scores)
+    assert dataset_path(pretrained_job).exists()  # cached for the Action FF job of the same seed
+    assert completed_result(pretrained_job) == pretrained
+
+
+def test_a_directed_dataset_and_an_extra_evaluation(tmp_path):
+    job = _smoke_job(
+        tmp_path,
+        agent="action-ff",
+        mode="pretrained",
+        dataset="directed+sequential",
+        offline_kwargs={"epochs": 1, "batch_size": 16, "repeat": 3},
+        dataset_kwargs={"planner_config": {"iterations": 2, "num_samples": 8}},
+        extra_evaluations={"far_goal": {"goal": [-0.5, -0.5]}},
+        variant="smoke/pretrained_directed_sequential",
+    )
+    result = run_job(job)
+    assert result.ok, result.error
+    metrics = json.loads((job.run_dir / "metrics.json").read_text())
+    assert metrics["pretraining"]["repeat"] == 3 and metrics["pretraining"]["sequential"]
+    assert metrics["pretraining"]["gradient_steps"] == 8  # ceil(40 * 3 / 16)
+    assert metrics["pretraining"]["dataset_info"]["policy"] == "directed"
+    extra = metrics["extra_evaluations"]["far_goal"]
+    assert extra["env_kwargs"]["goal"] == [-0.5, -0.5] and len(extra["episode_scores"]) == job.eval_episodes
+
+
+def test_ppo_cannot_be_pretrained(tmp_path):
+    result = run_job(_smoke_job(tmp_path, agent="ppo", mode="pretrained", hyperparams={}))
+    assert not result.ok and "cannot be pretrained" in (result.error or "")
+
+
+def test_repeat_transitions_keeps_copies_adjacent(tmp_path):
+    from ebm_agent.datasets import TransitionDataset
+
+    data = TransitionDataset(np.arange(6.0).reshape(3, 2), np.ones((3, 2)), np.zeros((3, 1)), np.arange(3))
+    repeated = repeat_transitions(data, 2)
+    np.testing.assert_array_equal(repeated.states[:, 0], [0, 0, 2, 2, 4, 4])
+    with pytest.raises(ValueError, match=r"Job\.mode"):
+        _smoke_job(tmp_path, mode="offline")
+
+
+# ---------------------------------------------------------------------------------------------------------- resume
+class FakeExecutor:
+    """Writes a finished-looking run folder for each job instead of training, and counts the jobs."""
+
+    def __init__(self) -> None:
+        self.ran: list[Job] = []
+
+    def map(self, jobs, progress=True):
+        results = []
+        for job in jobs:
+            self.ran.append(job)
+            job.run_dir.mkdir(parents=True, exist_ok=True)
+            np.savez(job.run_dir / "evaluations.npz", timesteps=[job.timesteps], results=[[-1.0]], ep_lengths=[[5]])
+            metrics = {
+                "timesteps": job.timesteps,
+                "score_mean": -1.0,
+                "score_std": 0.0,
+                "episode_scores": [-1.0],
+                "episode_lengths": [5],
+                "fingerprint": job_fingerprint(job),
+            }
+            (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+            results.append(JobResult(job=job, status="ok", timesteps=job.timesteps, score_mean=-1.0))
+        return results
+
+
+def test_resume_skips_complete_jobs_and_reruns_incomplete_ones(tmp_path):
+    parts = select_parts(build_parts(["table1"], make_context("smoke", str(tmp_path))), ["table1/particle/*"])
+    executor, messages = FakeExecutor(), []
+    first = run_parts(parts, executor, "ebm-eval first", progress=False, log=messages.append)
+    assert first.ok and len(executor.ran) == 4 and not first.skipped
+    assert read_provenance(executor.ran[0].run_dir)["command"] == "ebm-eval first"
+
+    executor.ran.clear()
+    (parts[1].jobs[0].run_dir / "metrics.json").unlink()  # interrupted run
+    stale = parts[1].jobs[1]
+    (stale.run_dir / "metrics.json").write_text(
+        json.dumps({**json.loads((parts[0].jobs[0].run_dir / "metrics.json").read_text())})
+    )
+    second = run_parts(parts, executor, "ebm-eval second", progress=False, log=messages.append)
+    assert [job.run_dir for job in executor.ran] == [parts[1].jobs[0].run_dir, stale.run_dir]
+    assert len(second.skipped) == 2
+    assert sum("complete (same configuration" in m for m in messages) == 2
+    assert any("moved" in m and "another configuration" in m for m in messages)
+    assert list(stale.run_dir.parent.glob("seed_0.replaced-*"))  # the other configuration's run is kept
+    sessions = read_sessions(tmp_path)
+    assert [s["command"] for s in sessions] == ["ebm-eval first", "ebm-eval second"]
+    assert len(sessions[1]["skipped"]) == 2 and len(sessions[1]["ran"]) == 2
+
+
+def test_a_figure_part_runs_once_through_eval_figures(tmp_path, monkeypatch):
+    calls = []
+
+    def fake_figure(out_dir, *, seeds, scale):
+        calls.append((Path(out_dir), tuple(seeds), scale))
+        (Path(out_dir) / "plan.png").write_bytes(b"\x89PNG fake")
+        payload = {"name": "plan_diversity", "pngs": ["plan.png"], "metrics": {"spread": 0.5}, "table_md": None}
+        (Path(out_dir) / "figure.json").write_text(json.dumps({**payload, "command": "x"}))
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: fake_figure)
+    parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
+    summary = run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert summary.figures_ran == ["plan_diversity/particle"] and figure_complete(parts[0])
+    assert calls == [(parts[0].figure_dir, (0,), "smoke")]
+    again = run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert again.figures_skipped == ["plan_diversity/particle"] and len(calls) == 1
+
+
+def test_a_failing_figure_is_reported_not_raised(tmp_path, monkeypatch):
+    def broken(out_dir, *, seeds, scale):
+        raise RuntimeError("no figure today")
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: broken)
+    parts = build_parts(["energy_maps"], make_context("smoke", str(tmp_path)))
+    summary = run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert not summary.ok and "no figure today" in summary.figures_failed["energy_maps/particle_maze"]
+
+
+# ------------------------------------------------------------------------------------------------------------- CLI
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--experiment", "table9"], "unknown experiment(s) 'table9'; choose from: table1, table2"),
+        (["--experiment", "table1", "--part", "nothing/*"], "--part 'nothing/*' matches no part"),
+        (["--experiment", "table1", "--timesteps", "10"], "--timesteps: not with --experiment"),
+        (["--experiment", "table1", "--scale", "huge"], "unknown scale 'huge'"),
+        (["--experiment", "list", "table1"], "--experiment list prints the experiments; give it alone"),
+        (["--part", "table1/*"], "--part: only with --experiment"),
+    ],
+)
+def test_bad_experiment_flags_exit_2_with_a_clear_message(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_experiment_list_prints_parts_and_cost(capsys):
+    assert main(["--experiment", "list"]) == 0
+    text = capsys.readouterr().out
+    for name in ("table1/particle/pretrained", "table2/sawyer/pretrained_directed_sequential", "sawyer_ppo/10x"):
+        assert name in text
+    assert "~" in text and "CPU time" in text
+
+
+def test_experiment_cli_runs_a_smoke_part_then_skips_it(tmp_path, capsys):
+    argv = ["--experiment", "table1", "--part", "table1/particle/online", "--scale", "smoke", "-f", str(tmp_path)]
+    assert main([*argv, "--no-progress"]) == 0
+    assert "0 already complete" in capsys.readouterr().err
+    doc = (tmp_path / "results.md").read_text()
+    assert "| online | particle | EBM |" in doc and "not run yet" in doc
+    assert main([*argv, "--no-progress"]) == 0
+    assert "2 already complete" in capsys.readouterr().err

@@ -1,0 +1,205 @@
+"""The paper-figure experiments at smoke scale: PNGs, figure.json round trip, metric keys and sane values; the
+occupancy counts on scripted trajectories; the callbacks against the random agent's own record; reproducibility."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from stable_baselines3.common.env_util import make_vec_env
+
+import envs  # noqa: F401
+from baselines.random_agent import RandomAgent, count_occupied_cells
+from eval.figures import FIGURES, FigureResult, budget_for, obstacle_optimum
+from eval.figures_callbacks import (
+    VOXEL_CORNERS,
+    EnergyMapCallback,
+    VisitedStatesCallback,
+    grid_counts,
+    grid_coverage,
+    original_voxel_occupancy,
+)
+from eval.figures_common import build_ebm
+
+SMOKE = budget_for("smoke")
+
+EXPECTED_METRICS = {
+    "obstacle_generalisation": {"box", "optimum", "standing_still", "random_mean", "methods", "paper", "seeds"},
+    "plan_diversity": {"horizons", "goal_energy", "plans_per_horizon", "seeds"},
+    "reacher_directions": {"cases", "horizon", "reach_tolerance", "seeds"},
+    "maze_exploration": {"agents", "free_cells", "timesteps", "seeds"},
+    "sawyer_exploration": {"agents", "max_random_occupancy", "normaliser", "seeds"},
+    "energy_maps": {"envs", "checkpoints", "timesteps", "seeds"},
+}
+
+
+@pytest.fixture(scope="module")
+def figures(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[FigureResult, Path]]:
+    """Every experiment run once at smoke scale (seed 0; two seeds for the Sawyer's normaliser over runs)."""
+    runs = {}
+    for name, function in FIGURES.items():
+        out_dir = tmp_path_factory.mktemp(name)
+        seeds = [0, 1] if name == "sawyer_exploration" else [0]
+        runs[name] = (function(out_dir, seeds=seeds, scale="smoke"), out_dir)
+    return runs
+
+
+def test_the_registry_holds_the_six_paper_figures():
+    assert set(FIGURES) == set(EXPECTED_METRICS)
+
+
+@pytest.mark.parametrize("name", sorted(EXPECTED_METRICS))
+def test_each_figure_writes_pngs_and_a_figure_json_that_round_trips(figures, name):
+    result, out_dir = figures[name]
+    assert result.name == name
+    assert result.pngs
+    for png in result.pngs:
+        assert png.parent == out_dir and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    loaded = FigureResult.load(out_dir / "figure.json")
+    assert loaded == result
+    json.dumps(result.metrics, allow_nan=False)  # JSON-serialisable as returned, no NaN
+    assert EXPECTED_METRICS[name] <= set(result.metrics)
+    assert result.table_md is not None and result.table_md.startswith("| ")
+    assert result.command.startswith("ebm-eval --experiment ") and "--scale smoke" in result.command
+
+
+def test_obstacle_scores_are_bounded_by_the_optimum_and_the_worst_case(figures):
+    metrics = figures["obstacle_generalisation"][0].metrics
+    assert set(metrics["methods"]) == {"ebm_box_energy", "ebm_no_box_energy", "action_ff", "action_ff_box_model"}
+    assert -10.0 < metrics["optimum"] < -4.5  # a detour around the box costs more than the open map's -4.5
+    for method in metrics["methods"].values():
+        # 100 steps at most, each at L1 <= 2 from the goal; nobody beats the lattice optimum by more than its grid.
+        assert -200.0 <= method["mean"] <= metrics["optimum"] + 0.5
+        assert 0.0 <= method["success_rate"] <= 1.0
+    assert metrics["standing_still"] == pytest.approx(-100.0)
+    assert metrics["paper"] == {"ebm": -61.94, "action_ff": -81.24}
+
+
+def test_obstacle_optimum_is_the_open_map_optimum_when_the_box_is_out_of_the_way():
+    assert obstacle_optimum((0.6, -0.9, 0.9, -0.6)) == pytest.approx(-4.5)
+    with pytest.raises(ValueError, match="obstacle"):
+        obstacle_optimum((0.1, 0.1, 0.5, 0.5))  # the authors' box touches the goal
+
+
+def test_plan_diversity_measures_are_sane(figures):
+    horizons = figures["plan_diversity"][0].metrics["horizons"]
+    assert set(horizons) == {str(h) for h in SMOKE.diversity_horizons}
+    for record in horizons.values():
+        assert record["envelope_area"]["mean"] > 0.0
+        assert record["lateral_deviation"]["mean"] >= 0.0 and record["goal_distance"]["mean"] >= 0.0
+        assert 0.0 <= record["feasible_fraction"]["mean"] <= 1.0
+
+
+def test_reacher_direction_fractions_are_sane(figures):
+    cases = figures["reacher_directions"][0].metrics["cases"]
+    assert set(cases) == {"opposite", "env_goal"}
+    for case in cases.values():
+        ccw, cw = case["ccw_fraction"]["mean"], case["cw_fraction"]["mean"]
+        assert 0.0 <= ccw <= 1.0 and 0.0 <= cw <= 1.0 and ccw + cw <= 1.0
+        assert 0.0 <= case["executed_agreement"]["mean"] <= 1.0
+        assert case["both_directions"] == (ccw > 0 and cw > 0)
+
+
+def test_maze_coverage_is_a_fraction_that_only_grows(figures):
+    metrics = figures["maze_exploration"][0].metrics
+    assert set(metrics["agents"]) == {"ebm", "random"}
+    for record in metrics["agents"].values():
+        assert 0.0 < record["coverage"]["mean"] <= 1.0
+        assert 0.0 < record["coverage_of_free"]["mean"] <= 1.0
+        curve = record["curve"]
+        assert curve["timesteps"][-1] == SMOKE.maze_timesteps
+        assert np.all(np.diff(curve["mean"]) >= 0) and curve["mean"][-1] == record["coverage"]["mean"]
+    assert 0 < metrics["free_cells"] < 400
+
+
+def test_sawyer_occupancy_is_normalised_by_the_best_random_run(figures):
+    metrics = figures["sawyer_exploration"][0].metrics
+    agents = metrics["agents"]
+    assert set(agents) == {"ebm", "random_uniform", "random_joint_targets"}
+    assert metrics["normaliser"] == metrics["max_random_occupancy"] + 5
+    best_random = max(max(agents[a]["occupancy"]["per_seed"]) for a in ("random_uniform", "random_joint_targets"))
+    assert metrics["max_random_occupancy"] == best_random
+    for name, record in agents.items():
+        assert 1 <= record["occupancy"]["mean"] <= 1000
+        assert np.all(np.diff(record["curve"]["mean"]) >= 0)
+        if name != "ebm":
+            assert record["normalised_percent"]["mean"] < 100.0
+            assert record["curve"]["timesteps"][-1] == SMOKE.sawyer_random_timesteps
+            assert record["occupancy_at_ebm_budget"]["mean"] <= record["occupancy"]["mean"]
+
+
+def test_energy_maps_snapshot_both_envs_at_the_checkpoints(figures):
+    metrics = figures["energy_maps"][0].metrics
+    assert set(metrics["envs"]) == {"particle", "maze"}
+    for record in metrics["envs"].values():
+        assert [s["timestep"] for s in record["snapshots"]] == metrics["checkpoints"]
+        assert len(record["snapshots"]) == SMOKE.energy_snapshots
+        for snapshot in record["snapshots"]:
+            assert 0.0 < snapshot["coverage"]["mean"] <= 1.0
+        assert record["explored_energy_change"]["mean"] >= 0.0
+
+
+def test_original_voxel_occupancy_on_a_scripted_finger_path():
+    centre = VOXEL_CORNERS[0] + 0.1  # -0.9, inside the first voxel on y and z
+    inside = [(corner + 0.1, centre, centre) for corner in VOXEL_CORNERS]  # one point in each of 10 voxels along x
+    repeat = [(corner + 0.05, centre, centre) for corner in VOXEL_CORNERS[:3]]  # the same voxels again
+    gaps = [(corner + 0.21, centre, centre) for corner in VOXEL_CORNERS[:-1]]  # between voxels: 0.2 < offset < 0.222
+    faces = [(VOXEL_CORNERS[4], centre, centre), (VOXEL_CORNERS[4] + 0.2, centre, centre)]  # strictly inside only
+    outside = [(-1.5, centre, centre), (0.0, 2.0, 0.0)]
+    assert original_voxel_occupancy(np.array(inside + repeat + gaps + faces + outside)) == 10
+    assert original_voxel_occupancy(np.array(gaps + faces + outside)) == 0
+    assert original_voxel_occupancy(np.zeros((0, 3))) == 0
+
+
+def test_grid_counts_and_coverage_on_a_scripted_maze_path():
+    row = np.stack([np.linspace(-0.95, 0.95, 20), np.full(20, -0.95)], axis=1)  # the centre of each bottom-row cell
+    assert grid_coverage(np.concatenate([row, row])) == pytest.approx(20 / 400)
+    counts = grid_counts(np.array([[0.95, -0.95], [0.95, -0.95], [-0.95, 0.95]]))
+    assert counts.shape == (20, 20) and counts.sum() == 3
+    assert counts[0, 19] == 2 and counts[19, 0] == 1  # row index is y, column index is x
+
+
+def test_visited_states_callback_matches_the_random_agent_record_across_episode_ends():
+    env = make_vec_env("ebm/Particle-v0", n_envs=2, seed=0, env_kwargs={"max_episode_steps": 7})
+    agent = RandomAgent("MultiInputPolicy", env, seed=0)
+    measure = lambda states: count_occupied_cells(states, 20, -1.0, 1.0)  # noqa: E731
+    callback = VisitedStatesCallback([10, 20, 30], measure)
+    agent.learn(40, callback=callback)
+    assert agent._episode_num >= 4  # episodes ended, so terminal observations were recorded
+    np.testing.assert_array_equal(callback.visited_states, agent.visited_states)
+    np.testing.assert_array_equal(callback.visited_timesteps, agent.visited_timesteps)
+    assert callback.curve_timesteps == [10, 20, 30, 40]
+    assert callback.curve_values == [agent.occupancy(20, -1.0, 1.0, until_timestep=t) for t in (10, 20, 30, 40)]
+
+
+def test_energy_map_callback_snapshots_the_untrained_model_at_zero():
+    agent = build_ebm(gym.make("ebm/Particle-v0"), 0, SMOKE)
+    callback = EnergyMapCallback([0, 8], resolution=8, bins=4)
+    agent.learn(16, callback=callback)
+    assert [s.timestep for s in callback.snapshots] == [0, 8]
+    assert callback.snapshots[0].energies.shape == (8, 8) and callback.snapshots[0].cell_energies.shape == (4, 4)
+    assert callback.snapshots[0].visit_counts.sum() == 1  # only the first observation before training
+
+
+def test_a_figure_is_reproducible_from_its_seed(tmp_path):
+    first = FIGURES["plan_diversity"](tmp_path / "a", seeds=[3], scale="smoke")
+    second = FIGURES["plan_diversity"](tmp_path / "b", seeds=[3], scale="smoke")
+    assert first.metrics == second.metrics
+
+
+def test_bad_scale_and_seeds_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="scale"):
+        FIGURES["plan_diversity"](tmp_path, seeds=[0], scale="huge")
+    with pytest.raises(ValueError, match="seeds"):
+        FIGURES["plan_diversity"](tmp_path, seeds=[], scale="smoke")
+
+
+def test_figure_result_stores_png_paths_relative_to_its_folder_and_plain_json_numbers(tmp_path):
+    result = FigureResult("x", [tmp_path / "a.png"], {"v": np.float32(1.5), "n": np.int64(2), "bad": np.nan}, None, "c")
+    path = result.save(tmp_path)
+    assert json.loads(path.read_text())["pngs"] == ["a.png"]
+    loaded = FigureResult.load(path)
+    assert loaded.pngs == [tmp_path / "a.png"] and loaded.metrics == {"v": 1.5, "n": 2, "bad": None}

@@ -1,0 +1,230 @@
+"""docs/results.md from a synthetic results folder, and the claims judged from the numbers."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from eval.claims import (
+    EXPLORATION_FIGURES,
+    FAILS,
+    HOLDS,
+    MISSING,
+    compare_scores,
+    evaluate_claims,
+    exploration_numbers,
+    exploration_pair,
+)
+from eval.experiments import build_parts, make_context
+from eval.jobs import Job
+from eval.parts import Part
+from eval.provenance import append_session, job_fingerprint, write_provenance
+from eval.results_doc import collect_cell, main, render_results, write_results
+
+MACHINE = {"cpu": "Test CPU", "cores": 2, "torch_threads": 1, "gpu": None, "device": "cpu"}
+
+
+def fake_run(job: Job, score: float, extra: dict | None = None, points: int = 1, fingerprint: str | None = None) -> None:
+    """A finished-looking run folder: what run_job writes, with a chosen score."""
+    job.run_dir.mkdir(parents=True, exist_ok=True)
+    timesteps = np.linspace(job.timesteps / points, job.timesteps, points).astype(int)
+    np.savez(
+        job.run_dir / "evaluations.npz",
+        timesteps=timesteps,
+        results=np.full((points, 2), score),
+        ep_lengths=np.full((points, 2), 100),
+    )
+    metrics = {
+        "timesteps": job.timesteps,
+        "score_mean": score,
+        "score_std": 0.0,
+        "episode_scores": [score, score],
+        "episode_lengths": [100, 100],
+        "success_rate": 0.5,
+        "extra_evaluations": extra or {},
+        "wall_time_s": 600.0,
+        "finished_at": "2026-11-20T10:00:00+0000",
+        "machine": MACHINE,
+        "fingerprint": fingerprint or job_fingerprint(job),
+    }
+    (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+    write_provenance(job.run_dir, "ebm-eval --experiment table1 -f runs/results")
+
+
+def parts_of(tmp_path: Path, name: str) -> dict[str, Part]:
+    return {p.name: p for p in build_parts([name], make_context("paper", str(tmp_path)))}
+
+
+def cell(part: Part, agent: str):
+    return next(c for c in part.cells if c.agent == agent)
+
+
+@pytest.fixture
+def results(tmp_path):
+    """Table 1's particle online cells finished over 3 seeds, EBM ahead; everything else not run."""
+    part = parts_of(tmp_path, "table1")["table1/particle/online"]
+    for seed, job in enumerate(cell(part, "ebm").jobs):
+        fake_run(job, -20.0 - seed, points=3)
+    for seed, job in enumerate(cell(part, "action-ff").jobs):
+        fake_run(job, -800.0 - 10 * seed, points=3)
+    append_session(tmp_path, {"command": "ebm-eval --experiment table1", "started": "2026-11-20T09:00", "machine": MACHINE})
+    return tmp_path
+
+
+def test_the_document_puts_our_numbers_beside_the_papers(results):
+    docs = results / "docs" / "results.md"
+    text = write_results(results, docs).read_text()
+    assert "| online | particle | EBM | -21.00 ± 0.82 | 3 | -21.00 [-22.00, -20.00] | 0.50 | -20.38 |" in text
+    assert "| online | particle | Action FF | -810.00 ± 8.16 | 3 |" in text and "| -850.67 |" in text
+    # Missing parts say so, with the command that runs exactly them; no number is invented.
+    assert "| online | maze | EBM | not run yet | 0/3 | - | - | -162.97 |" in text
+    assert "| table1/maze/online | not run yet | `ebm-eval --experiment table1 --part table1/maze/online -f " in text
+    assert "Not run yet: `ebm-eval --experiment obstacle --part obstacle/particle -f" in text
+    # Provenance of the finished part: command, machine, date, summed wall time.
+    row = next(line for line in text.splitlines() if line.startswith("| table1/particle/online |"))
+    assert "complete" in row and "`ebm-eval --experiment table1 -f runs/results`" in row
+    assert "Test CPU (2 cores, 1 torch threads)" in row and "2026-11-20" in row and row.endswith("| 60 min |")
+    # Anchors of the evaluation env, learning curves copied next to the document, the session log.
+    assert "| particle (start=(0.0, 0.0), goal=(0.5, 0.5)) | -4.50" in text
+    assert (docs.parent / "figures" / "table1_particle_online_learning_curves.png").exists()
+    assert "figures/table1_particle_online_learning_curves.png" in text
+    assert "## Sessions" in text and "`ebm-eval --experiment table1`" in text
+    assert "- particle: holds (EBM -21.00 [95% CI" in text
+
+
+def test_runs_of_another_configuration_or_unfinished_ones_do_not_count(tmp_path):
+    part = parts_of(tmp_path, "table1")["table1/maze/pretrained"]
+    jobs = cell(part, "ebm").jobs
+    fake_run(jobs[0], -70.0)
+    fake_run(jobs[1], -70.0, fingerprint="0123456789abcdef")  # a run of another configuration
+    fake_run(jobs[2], -70.0)
+    (jobs[2].run_dir / "evaluations.npz").unlink()  # interrupted
+    fake_run(replace(jobs[0], seed=7), -60.0)  # a seed beyond the defaults, same configuration
+    result = collect_cell(cell(part, "ebm"))
+    assert [job.seed for job, _ in result.runs] == [0, 7]
+    assert result.missing_seeds == [1, 2]
+    np.testing.assert_array_equal(result.scores, [-70.0, -60.0])
+
+
+def test_an_extra_evaluation_stands_for_the_fixed_on_variable_cell(tmp_path):
+    fixed = parts_of(tmp_path, "table2")["table2/sawyer/online_fixed"]
+    on_variable = parts_of(tmp_path, "fixed_on_variable")["fixed_on_variable/sawyer"]
+    for job in cell(fixed, "ebm").jobs:
+        fake_run(job, -3800.0, extra={"variable_goal": {"score_mean": -4500.0}})
+    assert collect_cell(cell(fixed, "ebm")).scores.tolist() == [-3800.0] * 3
+    assert collect_cell(cell(on_variable, "ebm")).scores.tolist() == [-4500.0] * 3
+
+
+def test_a_figure_is_copied_and_linked(tmp_path):
+    part = parts_of(tmp_path, "obstacle")["obstacle/particle"]
+    folder = part.figure_dir
+    folder.mkdir(parents=True)
+    (folder / "paths.png").write_bytes(b"\x89PNG fake")
+    figure = {
+        "name": "obstacle_generalisation",
+        "pngs": [str(folder / "paths.png")],
+        "metrics": {"ebm": {"score_mean": -60.0}, "action_ff": {"score_mean": -90.0}},
+        "table_md": "| agent | score |\n|---|---|\n| EBM | -60.00 |",
+        "command": "ebm-eval --experiment obstacle",
+    }
+    (folder / "figure.json").write_text(json.dumps(figure))
+    write_provenance(folder, "ebm-eval --experiment obstacle", scale="paper", seeds=[0, 1, 2], machine=MACHINE, wall_time_s=60)
+    docs = tmp_path / "docs" / "results.md"
+    text = render_results(tmp_path, docs)
+    assert "Paper: EBM -61.94, Action FF -81.24." in text and "| EBM | -60.00 |" in text
+    assert "![obstacle_generalisation: paths](figures/obstacle_particle_paths.png)" in text
+    assert (docs.parent / "figures" / "obstacle_particle_paths.png").read_bytes() == b"\x89PNG fake"
+    row = next(line for line in text.splitlines() if line.startswith("| obstacle/particle |"))
+    assert "complete" in row and "Test CPU" in row and "60 s" in row
+
+
+def test_the_module_command_writes_the_document(results, capsys):
+    docs = results / "out.md"
+    assert main(["-f", str(results), "--docs", str(docs)]) == 0
+    assert docs.exists() and str(docs) in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------------------------------------------- claims
+def test_a_comparison_flips_when_the_numbers_flip():
+    ahead = compare_scores("particle", "EBM", [-20, -21, -22], "Action FF", [-800, -810, -820])
+    behind = compare_scores("particle", "EBM", [-800, -810, -820], "Action FF", [-20, -21, -22])
+    assert ahead.verdict == HOLDS and "intervals separate" in ahead.evidence
+    assert behind.verdict == FAILS
+    close = compare_scores("maze", "EBM", [-10, -30, -20], "Action FF", [-21, -19, -22])
+    assert close.verdict == HOLDS and "intervals overlap" in close.evidence
+    assert compare_scores("maze", "EBM", [-1.0], "Action FF", [-2.0]).evidence.endswith("no interval")
+    missing = compare_scores("reacher", "EBM", [], "Action FF", [-40.0])
+    assert missing.verdict == MISSING and "EBM not run yet" in missing.evidence
+
+
+def test_claims_follow_the_numbers_they_are_given():
+    def lookup(ebm_score: float, ff_score: float, ppo_score: float | None):
+        def scores(key):
+            _part, agent, _setting = key
+            value = {"ebm": ebm_score, "action-ff": ff_score, "ppo": ppo_score}[agent]
+            return [] if value is None else [value, value - 1, value + 1]
+
+        return scores
+
+    def figures(part):
+        return {"coverage": {"ebm": [0.9, 0.8], "random": [0.3, 0.2]}, "timesteps": [1, 2]}  # the fallback's guess
+
+    claims = evaluate_claims(lookup(-10.0, -100.0, -50.0), figures)
+    assert [c.verdict for c in claims] == [HOLDS, HOLDS, HOLDS]
+    claims = evaluate_claims(lookup(-100.0, -10.0, -500.0), lambda part: None)
+    assert [c.verdict for c in claims] == [FAILS, HOLDS, MISSING]
+    claims = evaluate_claims(lookup(-10.0, -100.0, None), lambda part: {"nothing": 1.0})
+    assert claims[1].verdict == MISSING and claims[0].verdict == HOLDS
+    assert "reports no EBM / random pair" in claims[2].comparisons[0].evidence
+
+
+def _agents(**agents):
+    return {"seeds": [0, 1], "agents": agents}
+
+
+def test_exploration_compares_at_equal_budget_against_the_strongest_random_explorer():
+    maze, sawyer = EXPLORATION_FIGURES
+    maze_metrics = _agents(
+        ebm={"coverage": {"mean": 0.8, "std": 0.01, "per_seed": [0.79, 0.81]}},
+        random={"coverage": {"mean": 0.3, "std": 0.9, "per_seed": [0.2, 0.4]}},
+    )
+    assert exploration_numbers(maze_metrics, maze) == ("agents/ebm/coverage/mean", 0.8, "agents/random/coverage/mean", 0.3)
+    sawyer_metrics = _agents(
+        ebm={"occupancy": {"mean": 60.0, "std": 2.0}},
+        random_uniform={"occupancy": {"mean": 116.0}, "occupancy_at_ebm_budget": {"mean": 20.0}},
+        random_joint_targets={"occupancy": {"mean": 116.0}, "occupancy_at_ebm_budget": {"mean": 70.0}},
+    )
+    _key, ours, partner, theirs = exploration_numbers(sawyer_metrics, sawyer)
+    assert (ours, partner, theirs) == (60.0, "agents/random_joint_targets/occupancy_at_ebm_budget/mean", 70.0)
+    claims = evaluate_claims(
+        lambda key: [], {"maze_exploration/maze": maze_metrics, "sawyer_exploration/sawyer": sawyer_metrics}.get
+    )
+    assert [c.verdict for c in claims[2].comparisons] == [HOLDS, FAILS] and claims[2].verdict == FAILS
+
+
+@pytest.mark.parametrize(
+    ("metrics", "expected"),
+    [
+        ({"ebm_final_occupancy": 100, "random_final_occupancy": 40}, ("ebm_final_occupancy", 100.0)),
+        (
+            {"ebm": {"coverage": {"std": 0.9, "mean": 0.1}}, "random": {"coverage": {"std": 0.1, "mean": 0.5}}},
+            ("ebm/coverage/mean", 0.1),
+        ),
+        ({"occupancy": {"EBM": [0.5, 0.7], "Random": [0.1, 0.1]}}, ("occupancy/EBM", 0.6)),
+        (
+            {"ebm_coverage": 0.2, "random_coverage": 0.6, "ebm_timesteps": [10], "random_timesteps": [10]},
+            ("ebm_coverage", 0.2),
+        ),
+        ({"ebm_seconds": "fast", "random_seconds": "slow"}, None),
+    ],
+)
+def test_exploration_numbers_are_found_by_their_ebm_random_names(metrics, expected):
+    pair = exploration_pair(metrics)
+    if expected is None:
+        assert pair is None
+    else:
+        assert pair is not None and (pair[0], pair[1]) == (expected[0], pytest.approx(expected[1]))
