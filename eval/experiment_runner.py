@@ -140,6 +140,10 @@ def run_parts(
     if jobs:
         log(f"ebm-eval: {len(to_run)} run(s) to do, {len(finished)} already complete, in {out_dir}/")
     summary = RunSummary(skipped=finished)
+    for job in to_run:
+        # Recorded before the run, so that a run finished by an invocation that is later killed still names the
+        # command that produced it; rewritten with the run's status below.
+        write_provenance(job.run_dir, command, parts=part_of.get(job.run_dir, []), scale=parts[0].scale, status="started")
     summary.ran = executor.map(to_run, progress=progress) if to_run else []
     for result in summary.ran:
         write_provenance(

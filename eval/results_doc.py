@@ -404,7 +404,8 @@ def render_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: 
         "",
         "Score: the undiscounted sum of the env's per-step rewards over one deterministic evaluation episode (the "
         f"paper's metric), {SCALES[scale].eval_episodes} evaluation episode(s) per run; ± is the population std over "
-        "seeds of the per-seed mean scores; IQM [95% CI] (stratified bootstrap over seeds) from {MIN_SEEDS_FOR_IQM} seeds on. "
+        "seeds of the per-seed mean scores; IQM [95% CI] (stratified bootstrap over seeds) from "
+        f"{MIN_SEEDS_FOR_IQM} seeds on. "
         "The paper reports single numbers without seeds or spread.",
         "",
         "## Claims (judged from the numbers below)",

@@ -225,6 +225,24 @@ def test_resume_skips_complete_jobs_and_reruns_incomplete_ones(tmp_path):
     assert len(sessions[1]["skipped"]) == 2 and len(sessions[1]["ran"]) == 2
 
 
+class KilledExecutor(FakeExecutor):
+    """Finishes the first job, then dies like an invocation killed mid-sweep."""
+
+    def map(self, jobs, progress=True):
+        super().map(jobs[:1], progress)
+        raise KeyboardInterrupt
+
+
+def test_a_run_of_a_killed_invocation_still_names_its_command(tmp_path):
+    parts = select_parts(build_parts(["table1"], make_context("smoke", str(tmp_path))), ["table1/particle/online"])
+    executor = KilledExecutor()
+    with pytest.raises(KeyboardInterrupt):
+        run_parts(parts, executor, "ebm-eval killed", progress=False, log=lambda _m: None)
+    record = read_provenance(executor.ran[0].run_dir)
+    assert record["command"] == "ebm-eval killed" and record["status"] == "started"
+    assert completed_result(executor.ran[0]) is not None  # finished, so a rerun skips it and the doc cites its command
+
+
 def test_a_figure_part_runs_once_through_eval_figures(tmp_path, monkeypatch):
     calls = []
 
