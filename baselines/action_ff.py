@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -14,6 +14,7 @@ from baselines.action_planner import ActionPlanner, ActionPlannerConfig
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.config import OnlineConfig, make_config
 from ebm_agent.energy import EnergyConfig
+from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.networks import build_mlp
 from ebm_agent.policy import PlanningPolicy
@@ -65,6 +66,26 @@ class ForwardDynamicsModel(nn.Module):
         predicted = states + output if self.residual else output
         # Target dims are constants of the episode: copy them rather than predict them.
         return self.keep * predicted + (1.0 - self.keep) * states
+
+    def inference_evaluator(self) -> Callable[[Tensor, Tensor], Tensor] | None:
+        """
+        This model as a gradient-free callable on a weight snapshot with reused buffers (the EBM planner's fast path,
+        ``ebm_agent.fast_mlp``), so that both planners run their networks on the same kernels.
+
+        :return: ``f(states [..., D], actions [..., A]) -> [..., D]``, or None when the network cannot be evaluated so.
+        """
+        network = WorkspaceMLP.from_sequential(self.net)
+        if network is None:
+            return None
+        keep, residual = self.keep, self.residual
+
+        def predict(states: Tensor, actions: Tensor) -> Tensor:
+            inputs = torch.cat([states * keep, actions], dim=-1)  # [..., D + A]
+            output = network(inputs.reshape(-1, inputs.shape[-1])).reshape(states.shape)
+            predicted = states + output if residual else output
+            return keep * predicted + (1.0 - keep) * states
+
+        return predict
 
 
 class ActionFFAgent(PlannerAgentBase):

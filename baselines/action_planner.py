@@ -123,10 +123,11 @@ class ActionPlanner:
         else:
             actions = torch.zeros(num_envs, cfg.horizon, action_dim, device=self.device)  # [N, T, A]
             with torch.no_grad():
+                fast = _fast_model(model)
                 for _ in range(num_iterations):
-                    actions = self._mppi_update(model, start, goals, actions, generator)
+                    actions = self._mppi_update(fast, start, goals, actions, generator)
         with torch.no_grad():
-            states = self.rollout(model, start, actions)  # [N, T+1, D]
+            states = self.rollout(_fast_model(model), start, actions)  # [N, T+1, D]
             distance = final_goal_distance(states, goals, self.goal_indices)
         return states, actions, distance
 
@@ -163,3 +164,10 @@ class ActionPlanner:
                 actions -= cfg.step_size * grad
                 actions.copy_(torch.clamp(actions, self.action_low, self.action_high))
         return actions.detach()
+
+
+def _fast_model(model: ForwardModel) -> ForwardModel:
+    """The model's gradient-free evaluator with reused buffers when it has one (call under no_grad), else the model."""
+    evaluator = getattr(model, "inference_evaluator", None)
+    fast = evaluator() if callable(evaluator) else None
+    return model if fast is None else fast

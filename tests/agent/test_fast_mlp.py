@@ -9,7 +9,7 @@ from torch import nn
 
 from ebm_agent.costs import GaussianGoalEnergy, PlanCost
 from ebm_agent.energy import EnergyConfig, EnergyModel
-from ebm_agent.fast_mlp import MAX_WORKSPACES, WorkspaceMLP
+from ebm_agent.fast_mlp import FUSED_MIN_ROWS, MAX_WORKSPACES, WorkspaceMLP
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner, native_bf16
 
 
@@ -18,7 +18,7 @@ from ebm_agent.mppi import MPPIConfig, MPPIPlanner, native_bf16
 def test_evaluator_equals_the_module_exactly(activation: str, masked_dims: tuple[int, ...]) -> None:
     torch.manual_seed(0)
     energy = EnergyModel(3, EnergyConfig(activation=activation), masked_dims=masked_dims)
-    plans = torch.randn(2, 7, 6, 3)  # [N, K, T+1, D]
+    plans = torch.randn(2, 30, 6, 3)  # [N, K, T+1, D]: 300 transitions, enough for the fused op
     exact, fused = energy.inference_evaluator(fused=False), energy.inference_evaluator()
     assert exact is not None and fused is not None
     with torch.inference_mode():
@@ -107,7 +107,7 @@ def test_bf16_falls_back_to_buffers_when_the_fused_op_is_missing(monkeypatch) ->
 
     torch.manual_seed(0)
     energy = EnergyModel(2)
-    inputs = torch.randn(30, 4)
+    inputs = torch.randn(FUSED_MIN_ROWS + 2, 4)  # large enough for the fused op
     mlp = WorkspaceMLP.from_sequential(energy.net, torch.bfloat16)
     assert mlp is not None
     with torch.inference_mode():
@@ -122,3 +122,16 @@ def test_bf16_falls_back_to_buffers_when_the_fused_op_is_missing(monkeypatch) ->
         result = mlp(inputs)
     assert mlp.post_ops is None, "after a failure the evaluator stays on the buffer path"
     torch.testing.assert_close(result.float(), expected, rtol=1e-2, atol=1e-2)
+
+
+def test_action_ff_planner_uses_the_same_fast_path() -> None:
+    from baselines.action_ff import ForwardDynamicsModel
+
+    torch.manual_seed(0)
+    model = ForwardDynamicsModel(3, 2, masked_dims=(2,))
+    states, actions = torch.randn(4, 80, 3), torch.randn(4, 80, 2)  # [N, K, D], [N, K, A]
+    fast = model.inference_evaluator()
+    assert fast is not None
+    with torch.no_grad():
+        torch.testing.assert_close(fast(states, actions), model(states, actions), rtol=1e-5, atol=1e-6)
+        assert torch.equal(fast(states, actions)[..., 2], states[..., 2])  # the target dim is copied, not predicted
