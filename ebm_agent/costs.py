@@ -93,8 +93,8 @@ class GaussianGoalEnergy(_GoalTerm):
         :param goals: goals [N, G].
         :return: costs [N, K].
         """
-        final_goal_states = _select(plans[..., -1, :], self.goal_indices)  # [N, K, G]
-        _check_goals(goals, plans, len(self.goal_indices))
+        final_goal_states = select_dims(plans[..., -1, :], self.goal_indices)  # [N, K, G]
+        check_goals(goals, plans, len(self.goal_indices))
         difference = wrap_difference(final_goal_states - goals[:, None, :], self.period)
         return self.weight * difference.square().sum(-1)
 
@@ -118,8 +118,8 @@ class RampedGoalEnergy(_GoalTerm):
         :param goals: goals [N, G].
         :return: costs [N, K].
         """
-        goal_states = _select(plans, self.goal_indices)  # [N, K, T+1, G]
-        _check_goals(goals, plans, len(self.goal_indices))
+        goal_states = select_dims(plans, self.goal_indices)  # [N, K, T+1, G]
+        check_goals(goals, plans, len(self.goal_indices))
         horizon = plans.shape[-2] - 1
         ramp = (torch.arange(horizon + 1, device=plans.device, dtype=plans.dtype) / max(horizon, 1)).square()  # [T+1]
         difference = wrap_difference(goal_states - goals[:, None, None, :], self.period)
@@ -141,6 +141,8 @@ class RewardGoalEnergy:
             raise TypeError(f"reward_fn must be callable R(states [..., D], goals [..., G]) -> [...], got {reward_fn!r}.")
         self.reward_fn = reward_fn
         self.weight = float(weight)
+        # (reward_fn, goal dims, period) when reward_fn is negative_l1's, whose cost __call__ computes in fewer ops.
+        self._l1: tuple[Callable[[Tensor, Tensor], Tensor], tuple[int, ...], float | None] | None = None
 
     @classmethod
     def negative_l1(cls, goal_indices: Sequence[int], weight: float = 1.0, period: float | None = None) -> RewardGoalEnergy:
@@ -156,9 +158,11 @@ class RewardGoalEnergy:
         period = _check_period(period)
 
         def negative_l1_reward(states: Tensor, goals: Tensor) -> Tensor:
-            return -wrap_difference(_select(states, indices) - goals, period).abs().sum(-1)
+            return -wrap_difference(select_dims(states, indices) - goals, period).abs().sum(-1)
 
-        return cls(negative_l1_reward, weight)
+        energy = cls(negative_l1_reward, weight)
+        energy._l1 = (negative_l1_reward, indices, period)
+        return energy
 
     def __call__(self, plans: Tensor, goals: Tensor) -> Tensor:
         """
@@ -169,6 +173,13 @@ class RewardGoalEnergy:
         if goals.ndim != 2 or goals.shape[0] != plans.shape[0]:
             raise ValueError(f"goals must be [N, G] with N={plans.shape[0]}, got shape {tuple(goals.shape)}.")
         planned = plans[..., 1:, :]  # [N, K, T, D]
+        if self._l1 is not None and self._l1[0] is self.reward_fn:
+            # The same cost, weight * sum_{t,g} |s_t[g] - goal_g|, in 3-4 ops instead of 6 (it runs every MPPI iteration).
+            _, indices, period = self._l1
+            check_goals(goals, plans, len(indices))
+            difference = torch.sub(select_dims(planned, indices), goals[:, None, None, :])  # [N, K, T, G]
+            cost = wrap_difference(difference, period).abs_().sum(dim=(-2, -1))  # [N, K]
+            return cost if self.weight == 1.0 else cost.mul_(self.weight)
         goals_per_state = goals[:, None, None, :].expand(*planned.shape[:-1], goals.shape[-1])  # [N, K, T, G]
         rewards = self.reward_fn(planned, goals_per_state)  # [N, K, T]
         if rewards.shape != planned.shape[:-1]:
@@ -195,9 +206,9 @@ class VelocityPrior:
         :param plans: candidate plans [N, K, T+1, D].
         :return: costs [N, K].
         """
-        states = plans if self.dims is None else _select(plans, self.dims)
+        states = plans if self.dims is None else select_dims(plans, self.dims)
         velocity = torch.diff(states, dim=-2)  # [N, K, T, D']: s_{t+1} - s_t
-        return self.weight * velocity.square().mean(dim=(-2, -1))
+        return weighted_mean_square(velocity, self.weight)
 
 
 class AccelerationPrior:
@@ -219,11 +230,11 @@ class AccelerationPrior:
         :param plans: candidate plans [N, K, T+1, D].
         :return: costs [N, K].
         """
-        states = plans if self.dims is None else _select(plans, self.dims)
+        states = plans if self.dims is None else select_dims(plans, self.dims)
         if states.shape[-2] < 3:
             return plans.new_zeros(plans.shape[:-2])
         acceleration = torch.diff(states, n=2, dim=-2)  # [N, K, T-1, D']: s_{t+2} - 2 s_{t+1} + s_t
-        return self.weight * acceleration.square().mean(dim=(-2, -1))
+        return weighted_mean_square(acceleration, self.weight)
 
 
 class BoxObstacleEnergy:
@@ -298,7 +309,7 @@ class BoxObstacleEnergy:
         :param plans: candidate plans [N, K, T+1, D].
         :return: costs [N, K].
         """
-        positions = _select(plans, self.dims)  # [N, K, T+1, B]
+        positions = select_dims(plans, self.dims)  # [N, K, T+1, B]
         fractions = torch.arange(1, self.samples_per_segment + 1, device=plans.device, dtype=plans.dtype)
         fractions = fractions / self.samples_per_segment  # [S] in (0, 1]
         starts, ends = positions[..., :-1, None, :], positions[..., 1:, None, :]  # [N, K, T, 1, B]
@@ -427,7 +438,14 @@ class PlanCost:
         return term
 
 
-def _select(tensor: Tensor, indices: tuple[int, ...]) -> Tensor:
+def select_dims(tensor: Tensor, indices: tuple[int, ...]) -> Tensor:
+    """
+    The state dims ``indices`` of ``tensor`` [..., D]: a view when they are consecutive, else a gathered copy.
+
+    :param tensor: states [..., D].
+    :param indices: the dims, each < D.
+    :return: [..., len(indices)].
+    """
     if max(indices) >= tensor.shape[-1]:
         raise ValueError(f"state dims {indices} are out of range for states with {tensor.shape[-1]} dims.")
     run = _as_slice(indices)
@@ -455,7 +473,26 @@ def _check_period(period: float | None) -> float | None:
     return None if period is None else float(period)
 
 
-def _check_goals(goals: Tensor, plans: Tensor, goal_dim: int) -> None:
+def weighted_mean_square(values: Tensor, weight: float) -> Tensor:
+    """
+    weight * mean of values^2 over the last two dims, in 3 ops (the priors run in every MPPI iteration).
+
+    :param values: [N, K, a, b], e.g. finite differences of plans.
+    :param weight: the multiplier.
+    :return: [N, K].
+    """
+    count = values.shape[-2] * values.shape[-1]
+    return torch.linalg.vector_norm(values, dim=(-2, -1)).square_().mul_(weight / max(count, 1))
+
+
+def check_goals(goals: Tensor, plans: Tensor, goal_dim: int) -> None:
+    """
+    Raise a ValueError unless goals is [N, G] with N plans' envs and G = goal_dim.
+
+    :param goals: the goals.
+    :param plans: candidate plans [N, K, T+1, D].
+    :param goal_dim: G.
+    """
     if goals.ndim != 2 or goals.shape[0] != plans.shape[0] or goals.shape[1] != goal_dim:
         raise ValueError(
             f"goals must be [N, G] = [{plans.shape[0]}, {goal_dim}] (one goal per env, one value per goal index), "

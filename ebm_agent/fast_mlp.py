@@ -15,22 +15,29 @@ to float rounding (a few 1e-7), not bit for bit; bf16 ones with autocast's to bf
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 
 import torch
 from torch import Tensor, nn
 from torch.nn.utils import parametrize
 
-__all__ = ["FUSED_MIN_ROWS", "MAX_WORKSPACES", "WorkspaceMLP"]
+__all__ = ["FUSED_MIN_FEATURES", "FUSED_MIN_ROWS", "MAX_WORKSPACES", "WorkspaceMLP"]
 
 FUSED_MIN_ROWS = 128
 """Batches smaller than this use the buffers even where oneDNN's fused op exists: at 80 rows (the Action FF planner's
 one-step rollouts) its call overhead made it 10% slower, from 160 rows on it was faster (1.2x at 160, 1.9x at 640)."""
 
+FUSED_MIN_FEATURES = 9
+"""Layers with fewer inputs than this (the energy's first layer on [s, s'] of a 2-D or 4-D state) use the buffers even on
+the fused path: the fused op's fixed cost (~19 us per call at 800 rows, 2 threads) outweighs its gain on such thin
+matmuls, where addmm plus the in-place activation took ~14 us on the benchmark machine."""
+
 MAX_WORKSPACES = 4
 """Buffer sets kept per evaluator (one per batch size seen: the chunks of a plan, its last chunk, the final score)."""
 
 _InPlace = Callable[[Tensor], object]
+_Step = Callable[[Tensor], Tensor]
 _Fused = tuple[str, list[float]]
 """oneDNN's name of an activation and its scalars, e.g. ("leaky_relu", [0.2])."""
 
@@ -78,7 +85,8 @@ class WorkspaceMLP:
         self.layers = layers
         self.post_ops = post_ops
         self.in_features = layers[0][0].shape[1]
-        self._workspaces: dict[tuple[int, torch.dtype, torch.device, bool], list[Tensor]] = {}
+        # Per batch size (and dtype, device, inference mode): the layer functions and their output buffers.
+        self._workspaces: dict[tuple[int, torch.dtype, torch.device, bool], list[_Step]] = {}
 
     @classmethod
     def from_sequential(cls, net: nn.Sequential, dtype: torch.dtype | None = None, fused: bool = True) -> WorkspaceMLP | None:
@@ -127,53 +135,93 @@ class WorkspaceMLP:
         :return: [M, out] outputs in the compute dtype, a fresh tensor (the hidden activations live in the reused buffers).
         :raises RuntimeError: when called with gradients enabled (the buffers cannot be part of a graph).
         """
+        x = self._checked_input(inputs)
+        return self._run(x, self._steps(x))
+
+    def bind(self, inputs: Tensor) -> Callable[[], Tensor]:
+        """
+        Evaluation of whatever ``inputs`` holds when called, with the per-call checks and lookups done once here.
+
+        The planner binds the buffer it rewrites every MPPI iteration (see ``TransitionEvaluator.bind``); calling the
+        result equals ``self(inputs)`` on the buffer's current contents. Bind under ``torch.inference_mode()`` or
+        ``no_grad()``, and call it there.
+
+        :param inputs: [M, in] inputs, kept by reference.
+        :return: a function of no arguments returning the outputs [M, out] (a fresh tensor each call).
+        """
+        x = self._checked_input(inputs)
+        if x is not inputs:  # another dtype: the cast has to be redone on each call
+            return functools.partial(self, inputs)
+        return functools.partial(self._run, x, self._steps(x))
+
+    def _checked_input(self, inputs: Tensor) -> Tensor:
         if torch.is_grad_enabled():
             raise RuntimeError("WorkspaceMLP is for inference only: call it under torch.inference_mode() or no_grad().")
         if inputs.ndim != 2 or inputs.shape[1] != self.in_features:
             raise ValueError(f"WorkspaceMLP expects inputs [M, {self.in_features}], got {tuple(inputs.shape)}.")
         dtype = self.layers[0][0].dtype
-        x = inputs if inputs.dtype == dtype else inputs.to(dtype)
-        if self.post_ops is not None and x.shape[0] >= FUSED_MIN_ROWS:
-            fused = self._fused(x)
-            if fused is not None:
-                return fused
-        hidden = self._workspace(x)
-        last = len(self.layers) - 1
-        for index, (weight, bias, activation) in enumerate(self.layers):
-            out = None if index == last else hidden[index]  # [M, out_i]; the output is allocated fresh
-            if bias is None:
-                x = torch.mm(x, weight.t()) if out is None else torch.mm(x, weight.t(), out=out)
-            else:
-                x = torch.addmm(bias, x, weight.t()) if out is None else torch.addmm(bias, x, weight.t(), out=out)
-            if activation is not None:
-                activation(x)
-        return x
+        return inputs if inputs.dtype == dtype else inputs.to(dtype)
 
-    def _fused(self, x: Tensor) -> Tensor | None:
-        """The output via oneDNN's fused layers, or None (and never again) if this torch build rejects the op."""
-        linear_pointwise = _fused_linear()
-        assert self.post_ops is not None and linear_pointwise is not None
+    def _run(self, inputs: Tensor, steps: list[_Step]) -> Tensor:
+        x = inputs
         try:
-            for (weight, bias, _), (name, scalars) in zip(self.layers, self.post_ops, strict=True):
-                if name == "none" and weight.shape[0] == 1:  # the energy's [128 -> 1]: a plain mm is 2x faster
-                    x = torch.mm(x, weight.t()) if bias is None else torch.addmm(bias, x, weight.t())
-                else:
-                    x = linear_pointwise(x, weight, bias, name, scalars, "")  # [M, out_i]
-        except (RuntimeError, NotImplementedError):  # a private op: another torch version may lack or change it
+            for step in steps:
+                x = step(x)
+        except (RuntimeError, NotImplementedError):  # oneDNN's op is private: another torch version may lack or change it
+            if self.post_ops is None:
+                raise
             self.post_ops = None
-            return None
+            self._workspaces.clear()
+            steps[:] = self._steps(inputs)  # in place, so that a bound evaluation switches as well
+            return self._run(inputs, steps)
         return x
 
-    def _workspace(self, inputs: Tensor) -> list[Tensor]:
+    def _steps(self, inputs: Tensor) -> list[_Step]:
+        """The layer-by-layer functions x -> x for this batch size, with their output buffers (cached per batch size)."""
         key = (inputs.shape[0], inputs.dtype, inputs.device, torch.is_inference_mode_enabled())
-        buffers = self._workspaces.get(key)
-        if buffers is None:
-            if len(self._workspaces) >= MAX_WORKSPACES:
-                self._workspaces.clear()
-            sizes = [weight.shape[0] for weight, _, _ in self.layers[:-1]]
-            buffers = [torch.empty(inputs.shape[0], size, dtype=inputs.dtype, device=inputs.device) for size in sizes]
-            self._workspaces[key] = buffers
-        return buffers
+        cached = self._workspaces.get(key)
+        if cached is not None:
+            return cached
+        if len(self._workspaces) >= MAX_WORKSPACES:
+            self._workspaces.clear()
+        rows = inputs.shape[0]
+        fused = self.post_ops is not None and rows >= FUSED_MIN_ROWS
+        linear_pointwise = _fused_linear()
+        last = len(self.layers) - 1
+        steps: list[_Step] = []
+        for index, (weight, bias, activation) in enumerate(self.layers):
+            weight_t = weight.t()  # [in, out] view
+            if fused and self.post_ops is not None and linear_pointwise is not None:
+                name, scalars = self.post_ops[index]
+                thin = weight.shape[1] < FUSED_MIN_FEATURES and index < last
+                # The energy's [128 -> 1] output is 2x faster as a plain mm; thin layers see the note at FUSED_MIN_FEATURES.
+                if not thin and not (name == "none" and weight.shape[0] == 1):
+                    steps.append(functools.partial(_fused_step, linear_pointwise, weight, bias, name, scalars))
+                    continue
+            out = None if index == last else torch.empty(rows, weight.shape[0], dtype=inputs.dtype, device=inputs.device)
+            steps.append(functools.partial(_buffered_step, weight_t, bias, activation, out))  # out: [M, out_i] or fresh
+        self._workspaces[key] = steps
+        return steps
+
+
+def _buffered_step(
+    weight_t: Tensor, bias: Tensor | None, activation: _InPlace | None, out: Tensor | None, x: Tensor
+) -> Tensor:
+    """x @ weight_t + bias into ``out`` (a fresh tensor when None), then the in-place activation."""
+    if bias is None:
+        x = torch.mm(x, weight_t) if out is None else torch.mm(x, weight_t, out=out)
+    else:
+        x = torch.addmm(bias, x, weight_t) if out is None else torch.addmm(bias, x, weight_t, out=out)
+    if activation is not None:
+        activation(x)
+    return x
+
+
+def _fused_step(
+    linear_pointwise: Callable[..., Tensor], weight: Tensor, bias: Tensor | None, name: str, scalars: list[float], x: Tensor
+) -> Tensor:
+    """oneDNN's fused linear + activation: a fresh [M, out] tensor."""
+    return linear_pointwise(x, weight, bias, name, scalars, "")
 
 
 def _has_stateful_parametrization(module: nn.Module) -> bool:
