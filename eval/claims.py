@@ -1,13 +1,15 @@
-"""The reproduction's claims (issue 6), judged from the measured numbers: "holds", "does not hold" or "not measured".
+"""The reproduction's claims (issue 6), judged from the measured numbers: "holds", "inconclusive", "does not hold" or
+"not measured".
 
 Nothing here knows a verdict in advance: each claim names the numbers it compares (table cells by part, agent and
 evaluation; exploration figures by part) and ``evaluate_claims`` reads them through the lookups it is given.
 
-- A score comparison holds when the first agent's mean over seeds is higher (scores are sums of rewards: higher
-  is better). With at least 3 seeds on each side the evidence also gives each mean's 95% stratified-bootstrap
-  interval and says whether the intervals separate; with fewer it says so.
-- A claim over several envs holds when every comparison holds, does not hold when any measured one does not,
-  and is "not measured" while a comparison lacks its runs.
+- A score comparison does not hold when the first agent's mean over seeds is not higher (scores are sums of
+  rewards: higher is better). With at least 3 seeds on each side it holds when the two means' 95%
+  stratified-bootstrap intervals separate, and is "inconclusive" when the first mean is higher but the intervals
+  overlap; with fewer seeds a higher mean holds and the evidence says that no interval was computed.
+- A claim over several envs does not hold when any measured comparison does not, is "not measured" while a
+  comparison lacks its runs, is "inconclusive" while any comparison is, and holds when every comparison holds.
 - The exploration claim reads the exploration figures' metrics (``eval.figures``) at equal transitions: maze
   coverage of the EBM vs the random agent after the same budget, Sawyer finger occupancy of the EBM at its budget
   vs each random explorer's occupancy at that same budget, against the strongest random explorer. Keys are
@@ -27,6 +29,7 @@ import numpy as np
 from eval import stats
 
 HOLDS = "holds"
+INCONCLUSIVE = "inconclusive"
 FAILS = "does not hold"
 MISSING = "not measured"
 
@@ -47,7 +50,7 @@ class Comparison:
     """One measured comparison behind a claim.
 
     :param label: what it compares on (an env).
-    :param verdict: ``HOLDS``, ``FAILS`` or ``MISSING``.
+    :param verdict: ``HOLDS``, ``INCONCLUSIVE``, ``FAILS`` or ``MISSING``.
     :param evidence: the numbers, in words.
     """
 
@@ -61,7 +64,7 @@ class Claim:
     """A claim with its verdict and the comparisons that decide it.
 
     :param text: the claim.
-    :param verdict: ``HOLDS``, ``FAILS`` or ``MISSING``.
+    :param verdict: ``HOLDS``, ``INCONCLUSIVE``, ``FAILS`` or ``MISSING``.
     :param comparisons: the evidence, one comparison per env.
     """
 
@@ -139,7 +142,7 @@ AGENT_NAMES = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "
 
 
 def compare_scores(label: str, name: str, scores: Sequence[float], other_name: str, other: Sequence[float]) -> Comparison:
-    """Whether ``scores`` beat ``other`` on average, with the numbers as evidence.
+    """Whether ``scores`` beat ``other`` on average (beyond the 95% intervals from 3 seeds on), with the evidence.
 
     :param label: what is compared (an env).
     :param name: the first side's name.
@@ -159,6 +162,8 @@ def compare_scores(label: str, name: str, scores: Sequence[float], other_name: s
         low_b, high_b = stats.bootstrap_ci(second, stats.mean)
         separate = low_a > high_b or low_b > high_a
         evidence += "; the 95% intervals separate" if separate else "; the 95% intervals overlap"
+        if verdict == HOLDS and not separate:
+            verdict = INCONCLUSIVE
     else:
         evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds on a side, no interval"
     return Comparison(label, verdict, evidence)
@@ -176,14 +181,17 @@ def combine(comparisons: Sequence[Comparison]) -> str:
     """The verdict of a claim made of several comparisons.
 
     :param comparisons: its comparisons.
-    :return: ``FAILS`` if any fails, ``HOLDS`` if all hold, else ``MISSING``.
+    :return: ``FAILS`` if any fails, else ``MISSING`` if any lacks its runs (or there are none), else
+        ``INCONCLUSIVE`` if any is, else ``HOLDS``.
     """
     verdicts = [c.verdict for c in comparisons]
     if FAILS in verdicts:
         return FAILS
-    if verdicts and all(v == HOLDS for v in verdicts):
-        return HOLDS
-    return MISSING
+    if not verdicts or MISSING in verdicts:
+        return MISSING
+    if INCONCLUSIVE in verdicts:
+        return INCONCLUSIVE
+    return HOLDS
 
 
 def exploration_numbers(metrics: Mapping[str, Any], spec: ExplorationSpec) -> tuple[str, float, str, float] | None:

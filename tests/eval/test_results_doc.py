@@ -13,7 +13,10 @@ from eval.claims import (
     EXPLORATION_FIGURES,
     FAILS,
     HOLDS,
+    INCONCLUSIVE,
     MISSING,
+    Comparison,
+    combine,
     compare_scores,
     evaluate_claims,
     exploration_numbers,
@@ -155,10 +158,21 @@ def test_a_comparison_flips_when_the_numbers_flip():
     assert ahead.verdict == HOLDS and "intervals separate" in ahead.evidence
     assert behind.verdict == FAILS
     close = compare_scores("maze", "EBM", [-10, -30, -20], "Action FF", [-21, -19, -22])
-    assert close.verdict == HOLDS and "intervals overlap" in close.evidence
+    assert close.verdict == INCONCLUSIVE and "intervals overlap" in close.evidence
     assert compare_scores("maze", "EBM", [-1.0], "Action FF", [-2.0]).evidence.endswith("no interval")
     missing = compare_scores("reacher", "EBM", [], "Action FF", [-40.0])
     assert missing.verdict == MISSING and "EBM not run yet" in missing.evidence
+
+
+def test_a_claim_holds_only_when_every_comparison_holds():
+    def comparison(verdict):
+        return Comparison("env", verdict, "")
+
+    assert combine([comparison(HOLDS), comparison(HOLDS)]) == HOLDS
+    assert combine([comparison(HOLDS), comparison(INCONCLUSIVE)]) == INCONCLUSIVE
+    assert combine([comparison(INCONCLUSIVE), comparison(MISSING)]) == MISSING
+    assert combine([comparison(MISSING), comparison(FAILS), comparison(HOLDS)]) == FAILS
+    assert combine([]) == MISSING
 
 
 def test_claims_follow_the_numbers_they_are_given():
