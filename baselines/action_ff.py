@@ -13,7 +13,8 @@ from torch import Tensor, nn
 from baselines.action_planner import ActionPlanner, ActionPlannerConfig
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.config import OnlineConfig, make_config
-from ebm_agent.energy import EnergyConfig
+from ebm_agent.costs import wrap_difference
+from ebm_agent.energy import EnergyConfig, PeriodicFeatures
 from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.networks import build_mlp
@@ -26,9 +27,12 @@ class ForwardDynamicsModel(nn.Module):
     :param state_dim: D.
     :param action_dim: A.
     :param config: the trunk's architecture (an :class:`~ebm_agent.energy.EnergyConfig`; its output options are
-        ignored).
+        ignored). With ``periodic_inputs`` the periodic dims enter as (sin, cos), as the energy's do.
     :param masked_dims: target dims: zeroed in the input and copied unchanged to the prediction.
     :param residual: predict s' = s + f(s, a) (True) or s' = f(s, a) as the original (False).
+    :param periodic_dims: periodic state dims (angles); their prediction errors are measured the short way round
+        (:meth:`error`).
+    :param period: their period.
     """
 
     def __init__(
@@ -38,12 +42,18 @@ class ForwardDynamicsModel(nn.Module):
         config: EnergyConfig | None = None,
         masked_dims: Sequence[int] = (),
         residual: bool = False,
+        periodic_dims: Sequence[int] = (),
+        period: float = 2.0,
     ) -> None:
         super().__init__()
         cfg = config or EnergyConfig()
         self.state_dim, self.action_dim, self.residual = state_dim, action_dim, residual
+        self.periodic_dims, self.period = tuple(periodic_dims), float(period)
+        periodic = self.periodic_dims if cfg.periodic_inputs else ()
+        self.features = PeriodicFeatures(state_dim, periodic, period) if periodic else None
+        feature_dim = state_dim if self.features is None else self.features.feature_dim
         self.net = build_mlp(
-            state_dim + action_dim,
+            feature_dim + action_dim,
             state_dim,
             hidden_dim=cfg.hidden_dim,
             num_hidden_layers=cfg.num_hidden_layers,
@@ -62,10 +72,31 @@ class ForwardDynamicsModel(nn.Module):
         :param actions: [..., A].
         :return: [..., D].
         """
-        output = self.net(torch.cat([states * self.keep, actions], dim=-1))
+        output = self.net(torch.cat([self._inputs(states), actions], dim=-1))
         predicted = states + output if self.residual else output
         # Target dims are constants of the episode: copy them rather than predict them.
         return self.keep * predicted + (1.0 - self.keep) * states
+
+    def _inputs(self, states: Tensor) -> Tensor:
+        """[..., D] states -> [..., F] network inputs (target dims zeroed, periodic dims on the circle)."""
+        masked = states * self.keep
+        return masked if self.features is None else self.features(masked)
+
+    def error(self, predicted: Tensor, next_states: Tensor) -> Tensor:
+        """
+        Prediction error, periodic dims wrapped into [-period/2, period/2) (0.99 predicted for -0.99 is off by 0.02).
+
+        :param predicted: [..., D] predictions.
+        :param next_states: [..., D] real next states.
+        :return: [..., D] errors.
+        """
+        difference = predicted - next_states
+        if not self.periodic_dims:
+            return difference
+        dims = list(self.periodic_dims)
+        wrapped = difference.clone()
+        wrapped[..., dims] = wrap_difference(difference[..., dims], self.period)
+        return wrapped
 
     def inference_evaluator(self) -> Callable[[Tensor, Tensor], Tensor] | None:
         """
@@ -77,10 +108,10 @@ class ForwardDynamicsModel(nn.Module):
         network = WorkspaceMLP.from_sequential(self.net)
         if network is None:
             return None
-        keep, residual = self.keep, self.residual
+        keep, residual, features = self.keep, self.residual, self._inputs
 
         def predict(states: Tensor, actions: Tensor) -> Tensor:
-            inputs = torch.cat([states * keep, actions], dim=-1)  # [..., D + A]
+            inputs = torch.cat([features(states), actions], dim=-1)  # [..., F + A]
             output = network(inputs.reshape(-1, inputs.shape[-1])).reshape(states.shape)
             predicted = states + output if residual else output
             return keep * predicted + (1.0 - keep) * states
@@ -166,7 +197,13 @@ class ActionFFAgent(PlannerAgentBase):
         spec = self.goal_spec
         assert spec is not None
         dynamics = ForwardDynamicsModel(
-            spec.state_dim, spec.action_dim, self.network_config, spec.target_indices.tolist(), self.residual
+            spec.state_dim,
+            spec.action_dim,
+            self.network_config,
+            spec.target_indices.tolist(),
+            self.residual,
+            periodic_dims=spec.goal_indices.tolist() if spec.goal_period is not None else (),
+            period=spec.goal_period or 2.0,
         )
         self.policy = PlanningPolicy(
             self.observation_space,
@@ -207,7 +244,7 @@ class ActionFFAgent(PlannerAgentBase):
         model = self.dynamics_model
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         predicted = model(as_tensor(states), as_tensor(actions))  # [B, D]
-        loss = ((predicted - as_tensor(next_states)) ** 2).mean()
+        loss = (model.error(predicted, as_tensor(next_states)) ** 2).mean()
         if not torch.isfinite(loss):
             raise FloatingPointError(
                 f"The forward model diverged (loss={loss.item()}) at update {self._n_updates}; no update was applied."

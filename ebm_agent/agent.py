@@ -177,7 +177,14 @@ class EBMPlannerAgent(PlannerAgentBase):
     def _build_model(self) -> None:
         spec = self.goal_spec
         assert spec is not None
-        energy = EnergyModel(spec.state_dim, self.energy_config, masked_dims=spec.target_indices.tolist())
+        periodic = spec.goal_indices.tolist() if spec.goal_period is not None else []
+        energy = EnergyModel(
+            spec.state_dim,
+            self.energy_config,
+            masked_dims=spec.target_indices.tolist(),
+            periodic_dims=periodic,
+            period=spec.goal_period or 2.0,
+        )
         self.policy = PlanningPolicy(
             self.observation_space,
             self.action_space,

@@ -251,6 +251,24 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             actions[missing] = inverse(origin[missing], plans[rows, steps + 1][missing])
         return np.clip(actions, spec.action_low, spec.action_high).astype(np.float32)
 
+    def _align_periodic(self, plans: np.ndarray, states: np.ndarray) -> None:
+        """Move warm-start plans by whole periods of their periodic dims so that each starts next to its env's state.
+
+        A plan may run past the wrap (0.98 -> 1.03 for a normalised angle) while the env reports the state wrapped
+        (-0.97): shifted by one period the warm start stays a smooth continuation of the real state, as the
+        velocity and acceleration priors expect. In place.
+
+        :param plans: [n, T+1, D] warm starts.
+        :param states: [n, D] the envs' current states.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        if spec.goal_period is None:
+            return
+        dims, period = spec.goal_indices, spec.goal_period
+        turns = np.round((states[:, dims] - plans[:, 0, dims]) / period)  # [n, G] whole periods
+        plans[:, :, dims] += (turns * period)[:, None, :].astype(plans.dtype)
+
     def _deviation(self, real: np.ndarray, planned: np.ndarray, reduce: str) -> np.ndarray:
         """Distance between real and planned states over the model dims (target dims excluded).
 
@@ -452,10 +470,16 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 if warm[idx].any():
                     init = shift_plan(torch.from_numpy(plans[idx]), torch.from_numpy(shift[idx])).numpy()
                     init[~warm[idx]] = states[idx][~warm[idx], None, :]
+                    self._align_periodic(init, states[idx])
                 start = time.perf_counter()
                 new_plans, new_actions, cost = self._plan(states[idx], goals[idx], init, self._generator, training=True)
                 self.logger.record_mean("plan/ms", 1000.0 * (time.perf_counter() - start) / len(idx))
-                goal_gap = np.abs(new_plans[:, -1, spec.goal_indices] - goals[idx]).sum(axis=1)
+                goal_gap = np.abs(new_plans[:, -1, spec.goal_indices] - goals[idx])  # [n, G]
+                if spec.goal_period is not None:
+                    goal_gap = np.minimum(
+                        np.mod(goal_gap, spec.goal_period), spec.goal_period - np.mod(goal_gap, spec.goal_period)
+                    )
+                goal_gap = goal_gap.sum(axis=1)
                 self.logger.record_mean("plan/goal_dist", float(goal_gap.mean()))
                 plans[idx], plan_cost[idx], steps[idx], need[idx] = new_plans, cost, 0, False
                 planned_actions[idx] = np.nan if new_actions is None else new_actions

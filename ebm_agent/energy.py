@@ -15,7 +15,7 @@ from ebm_agent.config import check_field_types
 from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.networks import build_mlp, make_activation, normalise_dims
 
-__all__ = ["EnergyConfig", "EnergyModel", "TransitionEvaluator"]
+__all__ = ["EnergyConfig", "EnergyModel", "PeriodicFeatures", "TransitionEvaluator"]
 
 
 @dataclass
@@ -29,6 +29,10 @@ class EnergyConfig:
     :param spectral_norm: spectrally normalise the hidden layers (off at the original's HEAD).
     :param positive_output: make the output layer bias-free with weights passed through ``abs()`` (the original's
         ``get_weight(..., pos=True)``). The energy is then a non-negative combination of the last hidden features.
+    :param periodic_inputs: feed periodic state dims (the env's ``goal_period``, e.g. Reacher's normalised joint angles)
+        to the network as (sin, cos) of the angle rather than the raw coordinate, so that the two sides of the wrap
+        are neighbours (see :class:`PeriodicFeatures`). Not in the original, which fed Reacher's raw normalised
+        angles: their wrap sits at the arm's rest pose (docs/agent.md). No effect on envs without periodic dims.
     """
 
     hidden_dim: int = 128
@@ -36,6 +40,7 @@ class EnergyConfig:
     activation: str = "leaky_relu"
     spectral_norm: bool = False
     positive_output: bool = True
+    periodic_inputs: bool = True
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -53,30 +58,86 @@ class _Abs(nn.Module):
         return weight.abs()
 
 
+class PeriodicFeatures(nn.Module):
+    """
+    A state's network features with its periodic coordinates on the circle: [..., D] -> [..., D + P].
+
+    Each periodic coordinate x (period p) becomes sin(2 pi x / p) in its own slot, and cos(2 pi x / p) is appended
+    after the D slots, in the order of ``dims``; the other coordinates pass unchanged. States one period apart get
+    the same features, and the two sides of a wrap (0.99 and -0.99 for angles normalised to [-1, 1)) are neighbours.
+
+    :param state_dim: D.
+    :param dims: the P periodic dims (sorted, distinct, non-negative).
+    :param period: their period.
+    """
+
+    def __init__(self, state_dim: int, dims: Sequence[int], period: float) -> None:
+        super().__init__()
+        if not dims:
+            raise ValueError("PeriodicFeatures needs at least one periodic dim.")
+        if not (isinstance(period, (int, float)) and math.isfinite(period) and period > 0):
+            raise ValueError(f"PeriodicFeatures: period must be a positive number, got {period!r}.")
+        self.state_dim = state_dim
+        self.dims = tuple(dims)
+        self.period = float(period)
+        self.register_buffer("index", torch.tensor(self.dims, dtype=torch.long), persistent=False)  # [P]
+
+    @property
+    def feature_dim(self) -> int:
+        """D + P."""
+        return self.state_dim + len(self.dims)
+
+    def forward(self, states: Tensor) -> Tensor:
+        """
+        :param states: [..., D] states.
+        :return: [..., D + P] features.
+        """
+        index: Tensor = self.index  # type: ignore[assignment]
+        angles = states.index_select(-1, index) * (2.0 * math.pi / self.period)  # [..., P]
+        return torch.cat([states.index_copy(-1, index, torch.sin(angles)), torch.cos(angles)], dim=-1)
+
+    def extra_repr(self) -> str:
+        return f"dims={self.dims}, period={self.period}"
+
+
 class EnergyModel(nn.Module):
     """
-    MLP energy over a transition: ``E(s, s') = f(concat(s, s'))``, one scalar per transition.
+    MLP energy over a transition: ``E(s, s') = f(concat(phi(s), phi(s')))``, one scalar per transition.
 
-    The input is the concatenation of the two states, not their difference (as the original). Dims listed in
-    ``masked_dims`` are zeroed in both states before the network; the original did this for the arm's target
-    position "for stability", so the energy models dynamics and never sees the goal.
+    The input is the concatenation of the two states, not their difference (as the original); ``phi`` is the
+    identity unless ``periodic_dims`` are given (and ``config.periodic_inputs``), when it puts those coordinates on
+    the circle (:class:`PeriodicFeatures`). Dims listed in ``masked_dims`` are zeroed in both states' features
+    before the network; the original did this for the arm's target position "for stability", so the energy models
+    dynamics and never sees the goal.
 
     :param state_dim: D, size of one state.
     :param config: architecture; ``EnergyConfig()`` (the paper's 3 x 128 LeakyReLU network) when None.
     :param masked_dims: state dims to zero before the network (negative indices count from the end).
+    :param periodic_dims: state dims that are periodic (angles), or () for none.
+    :param period: the period of ``periodic_dims`` (2.0 for angles normalised to [-1, 1)).
     """
 
-    def __init__(self, state_dim: int, config: EnergyConfig | None = None, masked_dims: Sequence[int] = ()) -> None:
+    def __init__(
+        self,
+        state_dim: int,
+        config: EnergyConfig | None = None,
+        masked_dims: Sequence[int] = (),
+        periodic_dims: Sequence[int] = (),
+        period: float = 2.0,
+    ) -> None:
         super().__init__()
         if not isinstance(state_dim, int) or isinstance(state_dim, bool) or state_dim < 1:
             raise ValueError(f"EnergyModel: state_dim must be a positive int, got {state_dim!r}.")
         self.state_dim = state_dim
         self.config = config if config is not None else EnergyConfig()
         self.masked_dims = normalise_dims(masked_dims, state_dim, "masked_dims")
+        periodic = normalise_dims(periodic_dims, state_dim, "periodic_dims") if self.config.periodic_inputs else ()
+        self.features = PeriodicFeatures(state_dim, periodic, period) if periodic else None
+        feature_dim = state_dim if self.features is None else self.features.feature_dim  # F
 
         cfg = self.config
         self.net = build_mlp(
-            2 * state_dim,
+            2 * feature_dim,
             1,
             hidden_dim=cfg.hidden_dim,
             num_hidden_layers=cfg.num_hidden_layers,
@@ -89,12 +150,21 @@ class EnergyModel(nn.Module):
         if cfg.positive_output:
             parametrize.register_parametrization(self.output_layer, "weight", _Abs())
 
-        keep = torch.ones(2 * state_dim)
+        keep = torch.ones(2 * feature_dim)
         for dim in self.masked_dims:
-            keep[dim] = 0.0
-            keep[state_dim + dim] = 0.0
-        # [2D] multiplicative mask over concat(s, s'); not persistent: it follows from the constructor arguments.
+            columns = [dim]
+            if periodic and dim in periodic:
+                columns.append(state_dim + periodic.index(dim))  # its cos feature
+            for column in columns:
+                keep[column] = 0.0
+                keep[feature_dim + column] = 0.0
+        # [2F] multiplicative mask over concat(phi(s), phi(s')); not persistent: it follows from the constructor arguments.
         self.register_buffer("input_mask", keep, persistent=False)
+
+    @property
+    def feature_dim(self) -> int:
+        """F: the network's input size per state (D, plus one per periodic dim)."""
+        return self.state_dim if self.features is None else self.features.feature_dim
 
     @property
     def output_layer(self) -> nn.Linear:
@@ -126,7 +196,9 @@ class EnergyModel(nn.Module):
         if states.ndim == 0 or states.shape[-1] != self.state_dim:
             raise ValueError(f"EnergyModel: expected states of shape [..., {self.state_dim}], got {tuple(states.shape)}.")
         leading = states.shape[:-1]
-        pairs = torch.cat([states, next_states], dim=-1).reshape(-1, 2 * self.state_dim)  # [M, 2D]
+        if self.features is not None:
+            states, next_states = self.features(states), self.features(next_states)  # [..., F] each
+        pairs = torch.cat([states, next_states], dim=-1).reshape(-1, 2 * self.feature_dim)  # [M, 2F]
         mask: Tensor = self.input_mask  # type: ignore[assignment]
         if pairs.dtype != mask.dtype:
             pairs = pairs.to(mask.dtype)
@@ -150,7 +222,8 @@ class EnergyModel(nn.Module):
         network = WorkspaceMLP.from_sequential(self.net, dtype, fused)
         if network is None:
             return None
-        return TransitionEvaluator(network, self.state_dim, self.input_mask if self.masked_dims else None)  # type: ignore[arg-type]
+        mask = self.input_mask if self.masked_dims else None
+        return TransitionEvaluator(network, self.state_dim, mask, self.features)  # type: ignore[arg-type]
 
     def extra_repr(self) -> str:
         return f"state_dim={self.state_dim}, masked_dims={self.masked_dims}"
@@ -158,18 +231,29 @@ class EnergyModel(nn.Module):
 
 class TransitionEvaluator:
     """
-    E(s, s') through a :class:`WorkspaceMLP`: the pairs are written into a reused [M, 2D] buffer.
+    E(s, s') through a :class:`WorkspaceMLP`: the pairs are written into a reused [M, 2F] buffer.
 
     :param network: the snapshot of the energy network.
     :param state_dim: D.
-    :param input_mask: the [2D] input mask, or None when no dim is masked.
+    :param input_mask: the [2F] input mask, or None when no dim is masked.
+    :param features: the energy's periodic features (F = D + P), or None (F = D).
     """
 
-    def __init__(self, network: WorkspaceMLP, state_dim: int, input_mask: Tensor | None) -> None:
+    def __init__(
+        self, network: WorkspaceMLP, state_dim: int, input_mask: Tensor | None, features: PeriodicFeatures | None = None
+    ) -> None:
         self.network = network
         self.state_dim = state_dim
         self.input_mask = input_mask
+        self.features = features
+        self.feature_dim = state_dim if features is None else features.feature_dim
         self._pairs: Tensor | None = None
+
+    def _pair_inputs(self, states: Tensor, next_states: Tensor) -> list[Tensor]:
+        """What is concatenated into the pairs buffer: the two states, or their features."""
+        if self.features is None:
+            return [states, next_states]
+        return [self.features(states), self.features(next_states)]
 
     def __call__(self, states: Tensor, next_states: Tensor) -> Tensor:
         """
@@ -179,13 +263,13 @@ class TransitionEvaluator:
         """
         states, next_states, pairs = self._checked(states, next_states)
         leading = states.shape[:-1]
-        torch.cat([states, next_states], dim=-1, out=pairs.view(*leading, 2 * self.state_dim))
+        torch.cat(self._pair_inputs(states, next_states), dim=-1, out=pairs.view(*leading, 2 * self.feature_dim))
         if self.input_mask is not None:
             pairs.mul_(self.input_mask)
         return self.network(pairs).reshape(leading)  # [M, 1] -> [...]
 
     def _checked(self, states: Tensor, next_states: Tensor) -> tuple[Tensor, Tensor, Tensor]:
-        """The inputs in the network's dtype and the [M, 2D] pairs buffer sized for them; raises on bad shapes."""
+        """The inputs in the network's dtype and the [M, 2F] pairs buffer sized for them; raises on bad shapes."""
         if states.shape != next_states.shape or states.ndim == 0 or states.shape[-1] != self.state_dim:
             raise ValueError(
                 f"expected states and next_states of the same shape [..., {self.state_dim}], got "
@@ -197,7 +281,7 @@ class TransitionEvaluator:
             states, next_states = states.to(dtype), next_states.to(dtype)
         pairs = self._pairs
         if pairs is None or pairs.shape[0] != count or pairs.dtype != dtype or pairs.device != states.device:
-            pairs = torch.empty(count, 2 * self.state_dim, dtype=dtype, device=states.device)  # [M, 2D]
+            pairs = torch.empty(count, 2 * self.feature_dim, dtype=dtype, device=states.device)  # [M, 2F]
             self._pairs = pairs
         return states, next_states, pairs
 
@@ -217,12 +301,19 @@ class TransitionEvaluator:
             return functools.partial(self, states, next_states)
         states, next_states, pairs = self._checked(states, next_states)
         leading = states.shape[:-1]
-        pairs_view = pairs.view(*leading, 2 * self.state_dim)  # [..., 2D] view of the [M, 2D] buffer
+        pairs_view = pairs.view(*leading, 2 * self.feature_dim)  # [..., 2F] view of the [M, 2F] buffer
         network = self.network.bind(pairs)
-        inputs, mask = [states, next_states], self.input_mask
+        mask = self.input_mask
+        if self.features is None:
+            inputs = [states, next_states]
+
+            def pair_inputs() -> list[Tensor]:
+                return inputs
+        else:
+            pair_inputs = functools.partial(self._pair_inputs, states, next_states)
 
         def energies() -> Tensor:
-            torch.cat(inputs, dim=-1, out=pairs_view)
+            torch.cat(pair_inputs(), dim=-1, out=pairs_view)
             if mask is not None:
                 pairs.mul_(mask)
             return network().view(leading)  # [M, 1] -> [...]

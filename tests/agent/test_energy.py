@@ -6,7 +6,7 @@ import pytest
 import torch
 from torch import nn
 
-from ebm_agent.energy import EnergyConfig, EnergyModel
+from ebm_agent.energy import EnergyConfig, EnergyModel, PeriodicFeatures
 from ebm_agent.networks import build_mlp
 
 
@@ -139,3 +139,64 @@ def test_energy_state_dict_round_trip() -> None:
     clone.load_state_dict(model.state_dict())
     states, next_states = torch.randn(5, 4), torch.randn(5, 4)
     torch.testing.assert_close(clone(states, next_states), model(states, next_states))
+
+
+# ------------------------------------------------------------------------------------------------ periodic inputs
+def test_periodic_features_put_the_periodic_dims_on_the_circle() -> None:
+    features = PeriodicFeatures(4, (0, 1), period=2.0)
+    states = torch.tensor([[0.5, -1.0, 0.3, -0.2]])
+    out = features(states)  # [1, 6]
+    assert out.shape == (1, 6) and features.feature_dim == 6
+    expected = torch.tensor([[1.0, 0.0, 0.3, -0.2, 0.0, -1.0]])  # sin(pi/2), sin(-pi), v1, v2, cos(pi/2), cos(-pi)
+    torch.testing.assert_close(out, expected, atol=1e-6, rtol=0)
+    # Across the wrap: 0.999 and -0.999 are neighbours, and a whole period changes nothing.
+    near = features(torch.tensor([[0.999, 0.0, 0.0, 0.0], [-0.999, 0.0, 0.0, 0.0], [2.999, 0.0, 0.0, 0.0]]))
+    assert (near[0] - near[1]).abs().max() < 0.01
+    torch.testing.assert_close(near[0], near[2], atol=1e-5, rtol=0)
+    with pytest.raises(ValueError, match="period"):
+        PeriodicFeatures(4, (0,), period=0.0)
+
+
+def test_periodic_energy_sees_whole_periods_as_the_same_state() -> None:
+    torch.manual_seed(0)
+    energy = EnergyModel(4, periodic_dims=[0, 1], period=2.0)
+    assert energy.net[0].in_features == 12 and energy.feature_dim == 6
+    states, next_states = torch.rand(5, 4) * 2 - 1, torch.rand(5, 4) * 2 - 1
+    turned = next_states.clone()
+    turned[:, :2] += torch.tensor([2.0, -2.0])
+    torch.testing.assert_close(energy(states, next_states), energy(states, turned), atol=1e-5, rtol=1e-5)
+    # The velocity dims are not periodic: moving them by 2 changes the energy.
+    moved = next_states.clone()
+    moved[:, 2] += 2.0
+    assert not torch.allclose(energy(states, next_states), energy(states, moved))
+
+
+def test_periodic_inputs_can_be_turned_off_for_the_original_raw_angles() -> None:
+    energy = EnergyModel(4, EnergyConfig(periodic_inputs=False), periodic_dims=[0, 1])
+    assert energy.features is None and energy.net[0].in_features == 8
+
+
+def test_masking_a_periodic_dim_masks_its_sin_and_cos() -> None:
+    torch.manual_seed(0)
+    energy = EnergyModel(3, masked_dims=[1], periodic_dims=[1])
+    states, next_states = torch.rand(6, 3), torch.rand(6, 3)
+    other = states.clone()
+    other[:, 1] = torch.rand(6)
+    torch.testing.assert_close(energy(states, next_states), energy(other, next_states))
+
+
+@pytest.mark.parametrize("masked", [(), (2,)])
+def test_the_inference_evaluator_matches_the_module_with_periodic_inputs(masked: tuple[int, ...]) -> None:
+    torch.manual_seed(0)
+    energy = EnergyModel(4, masked_dims=masked, periodic_dims=[0, 1]).eval()
+    states, next_states = torch.rand(3, 40, 4) * 4 - 2, torch.rand(3, 40, 4) * 4 - 2  # [N, K, D], past the wrap
+    with torch.inference_mode():
+        expected = energy(states, next_states)
+        evaluator = energy.inference_evaluator(fused=False)
+        assert evaluator is not None
+        torch.testing.assert_close(evaluator(states, next_states), expected, atol=0, rtol=0)
+        bound = evaluator.bind(states, next_states)
+        torch.testing.assert_close(bound(), expected, atol=0, rtol=0)
+        fused = energy.inference_evaluator(fused=True)
+        assert fused is not None
+        torch.testing.assert_close(fused(states, next_states), expected, atol=1e-5, rtol=1e-5)
