@@ -50,6 +50,10 @@ class EnergyConfig:
             raise ValueError(f"EnergyConfig.num_hidden_layers must be an int >= 0, got {self.num_hidden_layers!r}.")
         make_activation(self.activation)
 
+    def __setstate__(self, state: dict[str, object]) -> None:
+        """Unpickle (SB3's ``load``); files saved before ``periodic_inputs`` existed fed raw angles, so they keep that."""
+        self.__dict__.update({"periodic_inputs": False, **state})
+
 
 class _Abs(nn.Module):
     """Parametrization that exposes ``abs(raw_weight)`` as the layer's weight."""

@@ -200,3 +200,14 @@ def test_the_inference_evaluator_matches_the_module_with_periodic_inputs(masked:
         fused = energy.inference_evaluator(fused=True)
         assert fused is not None
         torch.testing.assert_close(fused(states, next_states), expected, atol=1e-5, rtol=1e-5)
+
+
+def test_configs_pickled_before_periodic_inputs_existed_keep_raw_inputs() -> None:
+    import pickle
+
+    state = dict(EnergyConfig().__dict__)
+    del state["periodic_inputs"]  # what a file saved by an earlier version holds
+    old = EnergyConfig.__new__(EnergyConfig)
+    old.__setstate__(state)
+    assert old.periodic_inputs is False
+    assert pickle.loads(pickle.dumps(EnergyConfig())).periodic_inputs is True
