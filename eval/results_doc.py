@@ -10,7 +10,8 @@ yet" with the command that runs it; nothing is ever filled in. Per table: mean Â
 mean scores (10 deterministic episodes each at the paper's scale), the IQM with its 95% stratified-bootstrap
 interval from 3 seeds on (``eval.stats``), the paper's number, the anchors of the evaluation env
 (``eval.anchors``), and per part the command that produced it, the machine, the date and the wall time. Claims
-are judged from the numbers (``eval.claims``). Figures are copied to ``<docs>/figures/`` and linked.
+are judged from the numbers (``eval.claims``), and the cells whose interval excludes the paper's number are listed with
+the reason we know (``eval.differences``). Figures are copied to ``<docs>/figures/`` and linked.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ import numpy as np
 from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
 from eval.claims import evaluate_claims, render_claims
+from eval.differences import find_differences, render_differences
 from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
 from eval.parts import SCALES, Cell, Part, format_duration
@@ -366,7 +368,7 @@ def render_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: 
     regenerate = ["ebm-eval", "--report-only", "-f", str(out_dir)]
     regenerate += ["--scale", scale] if scale != "paper" else []
     regenerate += ["--seeds", *map(str, seeds)] if seeds else []
-    sections, by_key, figure_metrics = [], {}, {}
+    sections, by_key, figure_metrics, judged = [], {}, {}, []
     for experiment in EXPERIMENTS.values():
         parts = experiment.build(context)
         section = [f"## {experiment.title}", "", f"{experiment.description} ({experiment.source}.)", ""]
@@ -375,6 +377,7 @@ def render_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: 
             results = [collect_cell(cell) for cell in part.cells]
             for result in results:
                 by_key[(part.name, result.cell.agent, result.cell.setting)] = result.scores
+                judged.append((part.name, result.cell, result.scores))
             all_results += results
             per_part.append(results)
             statuses.append(part_status(part, results))
@@ -412,6 +415,7 @@ def render_results(out_dir: Path, docs_path: Path, scale: str = "paper", seeds: 
         "",
         render_claims(claims),
         "",
+        *render_differences(find_differences(judged)),
     ]
     return "\n".join(header + sections + _sessions_md(out_dir)).rstrip() + "\n"
 

@@ -1,0 +1,38 @@
+"""The 'where we differ from the paper' section: computed from the numbers, explained from eval/differences.py."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from eval.differences import explain, find_differences, render_differences
+from eval.parts import Cell
+
+
+def _cell(agent: str = "ebm", paper: float | None = -20.0) -> Cell:
+    return Cell("online", "maze", agent, (), paper)
+
+
+def test_a_cell_differs_only_when_the_paper_lies_outside_our_interval():
+    close = ("table1/maze/online", _cell(), np.array([-19.0, -21.0, -20.5]))
+    far = ("table1/maze/online", _cell(), np.array([-1200.0, -1210.0, -1190.0]))
+    better = ("table1/particle/online", _cell(), np.array([-5.0, -5.5, -4.8]))
+    few = ("table1/maze/online", _cell(), np.array([-1200.0, -1210.0]))
+    no_paper = ("table1/maze/online", _cell(paper=None), np.array([-1200.0, -1210.0, -1190.0]))
+    found = find_differences([close, far, better, few, no_paper])
+    assert [(d.part, d.direction) for d in found] == [("table1/maze/online", "worse"), ("table1/particle/online", "better")]
+    assert found[0].low <= found[0].mean <= found[0].high and found[0].seeds == 3
+
+
+def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
+    assert "first wall" in explain("table1/maze/pretrained", "action-ff")
+    assert "untrained agent" in explain("table1/particle/online", "ebm")
+    assert explain("table1/particle/online", "action-ff") == "not investigated yet."
+
+
+def test_the_section_lists_each_difference_with_its_reason():
+    found = find_differences([("table1/maze/online", _cell(), np.array([-1200.0, -1210.0, -1190.0]))])
+    text = "\n".join(render_differences(found))
+    assert "## Where we differ from the paper, and why" in text
+    assert "**table1/maze/online, EBM** (online): ours -1200.00" in text and "worse than the paper's -20" in text
+    assert "Why: Our agents reach the first wall" in text
+    assert "No finished cell differs" in "\n".join(render_differences([]))
