@@ -42,7 +42,9 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "Our agents reach the first wall and stay there, as PPO does at 5x the budget (docs/baselines.md). A plan of "
         "the default 10 steps of at most 0.05 per axis sees 0.5 ahead; the way round starts up column 0, away from "
         "the goal, so every goal energy rises along it and no plan of that horizon beats waiting at the wall. The "
-        "rejected moves at the wall are real 'stay' transitions, which energy training makes cheap. The paper's "
+        "rejected moves at the wall are real 'stay' transitions, which energy training makes cheap. A 30-step horizon "
+        "did not help either (pretrained EBM, seed 0, `python scripts/maze_horizon.py 30`: still at the wall): under the L1 "
+        "goal a plan must run about 40 steps round the wall before it ends nearer the goal than the wall is. The paper's "
         "pretrained EBM number is better than the maze's optimum under the strict wall rule (anchors above); the "
         "original's float artefact at y = 0.25 allows it (docs/environments.md). The original's horizon for the maze "
         "is not recorded (reference/original_code.md §9: 5 to 20 steps in its log).",
