@@ -69,7 +69,7 @@ PAPER_DOC = "docs/results.md"
 
 SWEEP_ONLY = ("env", "baseline", "agents", "timesteps", "eval_episodes", "eval_freq", "config", "env_kwargs")
 SWEEP_ONLY_MORE = ("eval_env_kwargs", "hyperparams")
-EXPERIMENT_ONLY = ("part", "scale", "docs")
+EXPERIMENT_ONLY = ("part", "scale", "docs", "records")
 
 
 def positive_int(text: str) -> int:
@@ -287,6 +287,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--docs",
         metavar="PATH",
         help=f"the results document (default: {PAPER_DOC} at the paper's scale, else <out>/results.md)",
+    )
+    experiments.add_argument(
+        "--records",
+        metavar="DIR",
+        help="keep the small files of finished runs and figures in DIR, restored into the results folder before "
+        "running or reporting and saved after (default: docs/records for docs/results.md, else none; 'none': off)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     parser.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity of the agents: 0, 1 or 2 (default: 0)")
@@ -533,6 +539,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         "seeds": list(args.seeds) if args.seeds else None,
         "out": out,
         "docs": args.docs or (PAPER_DOC if scale == "paper" else str(Path(out) / "results.md")),
+        "records": _records_dir(args.records, args.docs or (PAPER_DOC if scale == "paper" else None)),
         "report_only": bool(args.report_only),
         "device": args.device or "auto",
         "jobs": args.jobs or 1,
@@ -543,6 +550,15 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     }
     _check_ray_settings(settings)
     return settings
+
+
+def _records_dir(flag: str | None, docs: str | None) -> str | None:
+    """The records folder: the flag's, ``docs/records`` beside the published document, or none."""
+    from eval.records import RECORDS_DIR
+
+    if flag is not None:
+        return None if flag.lower() == "none" else flag
+    return RECORDS_DIR if docs == PAPER_DOC else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -61,9 +61,14 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "table1/reacher/*",
         "ebm",
         "Reacher's normalised angles wrap at the arm's rest pose, where every episode starts. Fed raw, as in the "
-        "original, the energy saw every move through the rest pose as a jump across the state space, and online "
-        "learning stayed at the random policy's level; our energy now takes each angle as (sin, cos) (docs/agent.md, "
-        "'Where we differ'), with the raw-input runs kept under runs/results_raw_angles/ for comparison.",
+        "original, the energy saw every move through the rest pose as a jump across the state space; our energy "
+        "takes each angle as (sin, cos) (docs/agent.md, 'Where we differ'), which brought the pretrained EBM nearer "
+        "the paper (raw inputs, 3 seeds: -35.03 +- 2.78 pretrained, -46.80 +- 3.61 online, in docs/results.md of "
+        "commit cdb9407). Online it did not help: plans move "
+        "the angles faster than the torques allow and a new plan starts about every 1.3 transitions "
+        "(`plan/num_plans` in the runs' TensorBoard logs), because the reward-form goal term outweighs the small "
+        "energy gap the loss keeps between real and planned transitions (docs/agent.md, 'Status'). The original's "
+        "goal term was a far weaker time-ramped mean square; a per-env goal weight is the next thing to try.",
     ),
 )
 """What we know about each difference; the first matching entry is used."""

@@ -266,6 +266,10 @@ def run_experiments(
 ) -> int:
     """``ebm-eval --experiment``: list the experiments, or run the parts, then write the results document.
 
+    With ``settings["records"]`` (``docs/records`` for the published document) the recorded runs are restored into
+    the results folder first (so they are skipped and reported) and every finished run is recorded after
+    (``eval.records``).
+
     :param settings: from ``eval.cli.resolve_experiment_settings``.
     :param parts: from ``selected_parts``.
     :param executor: runs the jobs.
@@ -274,13 +278,19 @@ def run_experiments(
     :return: 0 when nothing failed, else 1.
     """
     from eval.experiments import describe_experiments, make_context
+    from eval.records import restore_records, save_records
     from eval.results_doc import write_results
 
     if settings["experiments"] == ["list"]:
         print(describe_experiments(make_context(settings["scale"], settings["out"], settings["seeds"])))
         return 0
+    out, records = Path(settings["out"]), settings.get("records")
+    if records:
+        _stderr(restore_records(Path(records), out).describe("restored", Path(records), out))
     summary = run_parts(parts, executor, command, progress=progress) if parts else RunSummary()
-    path = write_results(Path(settings["out"]), Path(settings["docs"]), scale=settings["scale"], seeds=settings["seeds"])
+    if records:
+        _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
+    path = write_results(out, Path(settings["docs"]), settings["scale"], settings["seeds"], records=records)
     print(f"Results document: {path} (from {settings['out']}/)")
     return 0 if summary.ok else 1
 
