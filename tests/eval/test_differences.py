@@ -26,7 +26,9 @@ def test_a_cell_differs_only_when_the_paper_lies_outside_our_interval():
 def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
     assert "first wall" in explain("table1/maze/pretrained", "action-ff")
     assert "untrained agent" in explain("table1/particle/online", "ebm")
-    assert explain("table1/particle/online", "action-ff") == "not investigated yet."
+    assert "off by one" in explain("table1/particle/online", "action-ff")
+    assert "residual=true" in explain("table1/particle/pretrained", "action-ff")
+    assert explain("table2/sawyer/online_fixed", "action-ff") == "not investigated yet."
 
 
 def test_the_section_lists_each_difference_with_its_reason():

@@ -1,0 +1,71 @@
+"""Probe: one cell of a paper experiment with some of the agent's settings changed, scored as the experiment scores it.
+
+Usage:
+    python scripts/probe.py table1/particle/pretrained action-ff residual=true --seeds 0 1 2
+    python scripts/probe.py table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
+
+Runs the jobs of the cell (``ebm-eval --experiment <experiment> --part <part>``, agent ``AGENT``) with the given
+keyword arguments of the agent replaced (values in YAML, as ``ebm-eval --hyperparams``), into its own results folder
+(``runs/probe/<part>/<agent>/<changes>``; nothing is mixed with ``runs/results``), and prints each seed's score of its
+deterministic evaluation episodes, their mean and std, and the wall time. A finished probe run is not rerun.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+from dataclasses import replace
+
+import numpy as np
+import yaml
+
+from eval.experiments import build_parts, make_context, select_parts
+from eval.jobs import run_job
+from eval.provenance import completed_result
+
+
+def parse_change(text: str) -> tuple[str, object]:
+    """``key=value`` with a YAML value.
+
+    :param text: the change.
+    :return: (key, value).
+    :raises argparse.ArgumentTypeError: without ``=``.
+    """
+    key, sep, value = text.partition("=")
+    if not sep or not key:
+        raise argparse.ArgumentTypeError(f"expected KEY=VALUE, got {text!r}")
+    return key, yaml.safe_load(value)
+
+
+def main() -> None:
+    """Run the probe."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("part", help="a part of a paper experiment, e.g. table1/particle/pretrained")
+    parser.add_argument("agent", help="the cell's agent: ebm or action-ff")
+    parser.add_argument("changes", nargs="*", type=parse_change, help="KEY=VALUE agent keyword arguments")
+    parser.add_argument("--seeds", nargs="+", type=int, default=[0])
+    parser.add_argument("--episodes", type=int, help="deterministic evaluation episodes (default: the part's)")
+    parser.add_argument("--out", default="runs/probe", help="root of the probe's results folders")
+    args = parser.parse_args()
+    changes = dict(args.changes)
+    label = "_".join(f"{key}-{value}" for key, value in changes.items()) or "unchanged"
+    out = f"{args.out}/{args.part}/{args.agent}/{re.sub(r'[^A-Za-z0-9_.-]+', '', label)}"
+    experiment = args.part.split("/")[0]
+    part = select_parts(build_parts([experiment], make_context("paper", out)), [args.part])[0]
+    cell = next((cell for cell in part.cells if cell.agent == args.agent), None)
+    if cell is None:
+        parser.error(f"{args.part} has no cell of agent {args.agent!r}; its agents: {[c.agent for c in part.cells]}")
+    scores = []
+    for seed in args.seeds:
+        job = replace(cell.jobs[0], seed=seed, hyperparams={**cell.jobs[0].hyperparams, **changes})
+        job = replace(job, eval_episodes=args.episodes) if args.episodes else job
+        result = completed_result(job) or run_job(job)
+        if not result.ok:
+            raise SystemExit(f"seed {seed} failed: {result.error}")
+        scores.append(result.score_mean)
+        print(f"{args.part} {args.agent} {changes} seed {seed}: {result.score_mean:.2f} ({result.wall_time_s:.0f} s)")
+    print(f"mean {np.mean(scores):.2f} ± {np.std(scores):.2f} over {len(scores)} seed(s); results in {out}/")
+
+
+if __name__ == "__main__":
+    main()
