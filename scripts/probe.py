@@ -37,8 +37,12 @@ def parse_change(text: str) -> tuple[str, object]:
     return key, yaml.safe_load(value)
 
 
-def main() -> None:
-    """Run the probe."""
+def main(argv: list[str] | None = None) -> list[float]:
+    """Run the probe.
+
+    :param argv: the arguments (default: the command line's).
+    :return: each seed's mean score.
+    """
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("part", help="a part of a paper experiment, e.g. table1/particle/pretrained")
     parser.add_argument("agent", help="the cell's agent: ebm or action-ff")
@@ -46,12 +50,13 @@ def main() -> None:
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--episodes", type=int, help="deterministic evaluation episodes (default: the part's)")
     parser.add_argument("--out", default="runs/probe", help="root of the probe's results folders")
-    args = parser.parse_args()
+    parser.add_argument("--scale", default="paper", help="the experiment's scale: paper (default) or smoke")
+    args = parser.parse_args(argv)
     changes = dict(args.changes)
     label = "_".join(f"{key}-{value}" for key, value in changes.items()) or "unchanged"
     out = f"{args.out}/{args.part}/{args.agent}/{re.sub(r'[^A-Za-z0-9_.-]+', '', label)}"
     experiment = args.part.split("/")[0]
-    part = select_parts(build_parts([experiment], make_context("paper", out)), [args.part])[0]
+    part = select_parts(build_parts([experiment], make_context(args.scale, out)), [args.part])[0]
     cell = next((cell for cell in part.cells if cell.agent == args.agent), None)
     if cell is None:
         parser.error(f"{args.part} has no cell of agent {args.agent!r}; its agents: {[c.agent for c in part.cells]}")
@@ -65,6 +70,7 @@ def main() -> None:
         scores.append(result.score_mean)
         print(f"{args.part} {args.agent} {changes} seed {seed}: {result.score_mean:.2f} ({result.wall_time_s:.0f} s)")
     print(f"mean {np.mean(scores):.2f} ± {np.std(scores):.2f} over {len(scores)} seed(s); results in {out}/")
+    return scores
 
 
 if __name__ == "__main__":

@@ -1,0 +1,39 @@
+"""scripts/probe.py: one experiment cell with the agent's settings changed, in its own folder."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import pytest
+
+SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "probe.py"
+
+
+@pytest.fixture(scope="module")
+def probe():
+    spec = importlib.util.spec_from_file_location("probe_script", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules["probe_script"] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_a_probe_runs_the_cell_with_the_change_into_its_own_folder(probe, tmp_path, capsys):
+    argv = ["table1/particle/pretrained", "action-ff", "residual=true", "--scale", "smoke", "--out", str(tmp_path)]
+    scores = probe.main(argv)
+    assert len(scores) == 1
+    (metrics,) = tmp_path.rglob("metrics.json")
+    assert "residual-True" in str(metrics) and json.loads(metrics.read_text())["score_mean"] == pytest.approx(scores[0])
+    config = (metrics.parent / "config.yaml").read_text()
+    assert "residual: true" in config
+    assert probe.main(argv) == scores  # a finished probe run is read back, not rerun
+    assert "seed 0:" in capsys.readouterr().out
+
+
+def test_a_change_needs_a_key_and_a_value(probe):
+    assert probe.parse_change("cost={goal_weight: 0.1}") == ("cost", {"goal_weight": 0.1})
+    with pytest.raises(Exception, match="KEY=VALUE"):
+        probe.parse_change("residual")
