@@ -30,6 +30,7 @@ from eval.parts import Part
 from eval.provenance import (
     append_session,
     completed_result,
+    is_current_run,
     job_fingerprint,
     machine_info,
     now,
@@ -99,9 +100,12 @@ def plan_jobs(jobs: Sequence[Job], log: Log = _stderr) -> tuple[list[Job], list[
             finished.append(result)
             continue
         metrics = read_metrics(job.run_dir)
-        if metrics is not None and metrics.get("fingerprint") != job_fingerprint(job):
+        if metrics is not None and not is_current_run(job, metrics):
             moved = _move_aside(job.run_dir, str(metrics.get("fingerprint")))
-            log(f"moved {job.run_dir} aside to {moved.name}: it holds a finished run of another configuration")
+            log(
+                f"moved {job.run_dir} aside to {moved.name}: it holds a finished run of another configuration or of "
+                "other library defaults"
+            )
         to_run.append(job)
     return to_run, finished
 

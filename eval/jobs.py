@@ -245,7 +245,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
 
     import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
     from eval.evaluation import append_evaluation, evaluate_episodes
-    from eval.provenance import job_fingerprint, machine_info
+    from eval.provenance import defaults_digest, job_fingerprint, machine_info
     from eval.registry import get_agent
 
     spec = get_agent(job.agent)
@@ -305,6 +305,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "machine": machine_info(model.device),
             "fingerprint": job_fingerprint(job),
+            "defaults_digest": defaults_digest(job),
             "versions": library_versions(),
         }
         (run_dir / "metrics.json").write_text(json.dumps(to_plain(metrics), indent=2))

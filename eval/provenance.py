@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -51,17 +52,60 @@ def job_fingerprint(job: Job) -> str:
     return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]
 
 
+@functools.lru_cache(maxsize=64)
+def _defaults_digest(agent: str, env_id: str) -> str | None:
+    from eval.registry import AGENTS
+
+    spec = AGENTS.get(agent)
+    if spec is None or spec.defaults is None:
+        return None
+    settings = spec.defaults(env_id)
+    return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:16]
+
+
+def defaults_digest(job: Job) -> str | None:
+    """A short hash of the library defaults the job's agent runs with (``AgentSpec.defaults``): what the
+    fingerprint cannot see, since it hashes the job and not the code's defaults. A pretrained job on a directed
+    dataset also depends on the EBM agent that collects it.
+
+    :param job: the job.
+    :return: 16 hex digits, or None when the agent does not declare its defaults.
+    """
+    parts = [_defaults_digest(job.agent, job.env_id)]
+    if job.mode == "pretrained" and job.dataset != "random":
+        parts.append(_defaults_digest("ebm", job.env_id))
+    if all(part is None for part in parts):
+        return None
+    return hashlib.sha256("/".join(str(part) for part in parts).encode()).hexdigest()[:16]
+
+
+def is_current_run(job: Job, metrics: dict[str, Any] | None) -> bool:
+    """Whether a run's metrics stand for the job: same fingerprint, and made with today's defaults.
+
+    Runs finished before defaults were recorded carry no digest and are taken as they are.
+
+    :param job: the job.
+    :param metrics: the run's ``metrics.json`` (None: no finished run).
+    :return: True when the run counts.
+    """
+    if metrics is None or metrics.get("fingerprint") != job_fingerprint(job):
+        return False
+    recorded = metrics.get("defaults_digest")
+    return recorded is None or recorded == defaults_digest(job)
+
+
 def completed_result(job: Job) -> JobResult | None:
     """The result of a finished run of this very job, read back from its run folder, or None.
 
-    A run is finished when its ``metrics.json`` parses, carries the job's fingerprint and its ``evaluations.npz``
-    exists; a run of another configuration, a failed or an interrupted run is not.
+    A run is finished when its ``metrics.json`` parses, carries the job's fingerprint (and, when recorded, today's
+    defaults digest) and its ``evaluations.npz`` exists; a run of another configuration, a failed or an interrupted
+    run is not.
 
     :param job: the job.
     :return: the result (status "ok") or None.
     """
     metrics = read_metrics(job.run_dir)
-    if metrics is None or metrics.get("fingerprint") != job_fingerprint(job):
+    if metrics is None or not is_current_run(job, metrics):
         return None
     if not (job.run_dir / "evaluations.npz").exists():
         return None
@@ -207,7 +251,9 @@ __all__ = [
     "SESSIONS_FILE",
     "append_session",
     "completed_result",
+    "defaults_digest",
     "describe_machine",
+    "is_current_run",
     "job_fingerprint",
     "machine_info",
     "now",

@@ -6,7 +6,11 @@ without) every agent package, and a process-pool worker imports only the agent i
 
 from __future__ import annotations
 
+import dataclasses
 import importlib
+import inspect
+import re
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
@@ -51,12 +55,71 @@ class AgentSpec:
     :param tb_log_name: the agent's own name, used as its label in tables and plots.
     :param callbacks: extra callbacks for ``learn`` given the budget (e.g. PPO's exact-budget stop), or None.
     :param description: one line for ``ebm-eval --help``.
+    :param defaults: ``defaults(env_id) -> dict``: the agent's default settings for that env (JSON-able), whose
+        digest every finished run stores, so that a change of a library default retires the runs made before it
+        (``eval.provenance.defaults_digest``); None: not tracked.
     """
 
     factory: Callable[..., BaseAlgorithm]
     tb_log_name: str
     callbacks: Callable[[int], list[BaseCallback]] | None = None
     description: str = ""
+    defaults: Callable[[str], dict[str, Any]] | None = None
+
+
+NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "stats_window_size"})
+"""Constructor arguments that do not change what a run measures (left out of ``class_defaults``)."""
+
+
+def _plain_default(value: Any) -> Any:
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (tuple, list)):
+        return [_plain_default(item) for item in value]
+    return type(value).__name__  # an object's repr may hold its address: its type is what is stable
+
+
+def class_defaults(agent_class: type) -> dict[str, Any]:
+    """The default settings of an agent class: its constructor's defaults and, for every config dataclass its
+    annotations name (``MPPIConfig | dict | None``), that dataclass's default fields.
+
+    :param agent_class: the class.
+    :return: ``{argument: default, "argument:ConfigName": {field: default}}``.
+    """
+    module = vars(sys.modules[agent_class.__module__])
+    defaults: dict[str, Any] = {}
+    for name, parameter in inspect.signature(agent_class).parameters.items():
+        if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
+            continue
+        defaults[name] = _plain_default(parameter.default)
+        for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
+            config = module.get(token)
+            if isinstance(config, type) and dataclasses.is_dataclass(config):
+                try:
+                    defaults[f"{name}:{config.__name__}"] = dataclasses.asdict(config())
+                except TypeError:  # a config without defaults for every field
+                    continue
+    return defaults
+
+
+def _class_defaults_of(module: str, class_name: str) -> Callable[[str], dict[str, Any]]:
+    def defaults(env_id: str) -> dict[str, Any]:
+        return class_defaults(getattr(importlib.import_module(module), class_name))
+
+    return defaults
+
+
+def ppo_defaults(env_id: str) -> dict[str, Any]:
+    """PPO's settings for an env: the tuned table's entry and SB3's PPO defaults.
+
+    :param env_id: the env.
+    :return: ``{"table": ..., "PPO": ...}``.
+    """
+    from stable_baselines3 import PPO
+
+    from baselines.ppo import ppo_hyperparams
+
+    return {"table": ppo_hyperparams(env_id), "PPO": class_defaults(PPO)}
 
 
 def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
@@ -155,10 +218,31 @@ def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
 
 
 AGENTS: dict[str, AgentSpec] = {
-    "ebm": AgentSpec(make_ebm, "EBM", description="energy-based planner (the agent under test)"),
-    "ppo": AgentSpec(make_ppo_agent, "PPO", ppo_callbacks, description="SB3 PPO with tuned per-env hyperparameters"),
-    "action-ff": AgentSpec(make_action_ff, "ActionFF", description="action-conditioned feed-forward model + MPPI"),
-    "random": AgentSpec(make_random, "Random", description="uniform random actions (exploration baseline)"),
+    "ebm": AgentSpec(
+        make_ebm,
+        "EBM",
+        description="energy-based planner (the agent under test)",
+        defaults=_class_defaults_of("ebm_agent.agent", "EBMPlannerAgent"),
+    ),
+    "ppo": AgentSpec(
+        make_ppo_agent,
+        "PPO",
+        ppo_callbacks,
+        description="SB3 PPO with tuned per-env hyperparameters",
+        defaults=ppo_defaults,
+    ),
+    "action-ff": AgentSpec(
+        make_action_ff,
+        "ActionFF",
+        description="action-conditioned feed-forward model + MPPI",
+        defaults=_class_defaults_of("baselines.action_ff", "ActionFFAgent"),
+    ),
+    "random": AgentSpec(
+        make_random,
+        "Random",
+        description="uniform random actions (exploration baseline)",
+        defaults=_class_defaults_of("baselines.random_agent", "RandomAgent"),
+    ),
 }
 """Agent names accepted by ``--agents`` / ``--baseline``, mapped to their specs. Tests may register more."""
 
@@ -189,4 +273,13 @@ def get_agent(name: str) -> AgentSpec:
         raise ValueError(f"unknown agent {name!r}; choose one of: {', '.join(sorted(AGENTS))}") from None
 
 
-__all__ = ["AGENTS", "AgentFactory", "AgentSpec", "get_agent", "register_agent"]
+__all__ = [
+    "AGENTS",
+    "NOT_MEASURED",
+    "AgentFactory",
+    "AgentSpec",
+    "class_defaults",
+    "get_agent",
+    "ppo_defaults",
+    "register_agent",
+]

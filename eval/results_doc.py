@@ -36,7 +36,7 @@ from eval.differences import find_differences, render_differences
 from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
 from eval.parts import SCALES, Cell, Part, format_duration
-from eval.provenance import describe_machine, job_fingerprint, read_metrics, read_provenance, read_sessions
+from eval.provenance import describe_machine, is_current_run, read_metrics, read_provenance, read_sessions
 from eval.records import RECORDS_DIR, restore_records
 
 MIN_SEEDS_FOR_IQM = 3
@@ -95,7 +95,7 @@ def collect_cell(cell: Cell) -> CellResult:
     for seed in sorted(jobs):
         job = jobs[seed]
         metrics = read_metrics(job.run_dir)
-        if metrics is None or metrics.get("fingerprint") != job_fingerprint(job):
+        if metrics is None or not is_current_run(job, metrics):
             continue
         if not (job.run_dir / "evaluations.npz").exists():
             continue

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,7 +15,8 @@ from eval.experiments import EXPERIMENTS, build_parts, make_context, select_part
 from eval.jobs import Job, JobResult, run_job
 from eval.parts import SCALES, Part
 from eval.pretraining import dataset_path, repeat_transitions
-from eval.provenance import completed_result, job_fingerprint, read_provenance, read_sessions
+from eval.provenance import completed_result, defaults_digest, job_fingerprint, read_provenance, read_sessions
+from eval.registry import AGENTS, class_defaults
 
 pytest.importorskip("envs.particle")
 
@@ -132,6 +133,7 @@ def test_a_pretrained_job_writes_the_same_files_as_an_online_one(tmp_path):
     assert metrics["mode"] == "pretrained" and metrics["timesteps"] == pretrained_job.timesteps == 40
     assert metrics["pretraining"]["dataset_size"] == 40 and metrics["pretraining"]["gradient_steps"] == 3
     assert metrics["fingerprint"] == job_fingerprint(pretrained_job)
+    assert metrics["defaults_digest"] == defaults_digest(pretrained_job) is not None
     with np.load(pretrained.run_dir / "evaluations.npz") as data:
         np.testing.assert_array_equal(data["timesteps"], [40])
         np.testing.assert_allclose(data["results"][-1], pretrained.episode_scores)
@@ -306,3 +308,62 @@ def test_experiment_cli_runs_a_smoke_part_then_skips_it(tmp_path, capsys):
     assert "| online | particle | EBM |" in doc and "not run yet" in doc
     assert main([*argv, "--no-progress"]) == 0
     assert "2 already complete" in capsys.readouterr().err
+
+
+@dataclass
+class _ToyConfig:
+    width: int = 128
+
+
+class _ToyAgent:
+    def __init__(
+        self,
+        policy: str,
+        env: object,
+        config: _ToyConfig | dict | None = None,
+        rate: float = 1e-3,
+        seed: int | None = None,
+        verbose: int = 0,
+    ) -> None:
+        pass
+
+
+def test_class_defaults_hold_the_config_fields_and_not_what_does_not_measure():
+    defaults = class_defaults(_ToyAgent)
+    assert defaults == {"config": None, "config:_ToyConfig": {"width": 128}, "rate": 1e-3}
+    ebm = class_defaults(__import__("ebm_agent.agent", fromlist=["EBMPlannerAgent"]).EBMPlannerAgent)
+    assert ebm["energy:EnergyConfig"]["hidden_dim"] == 128 and ebm["planner_config:MPPIConfig"]["iterations"] == 80
+    assert "seed" not in ebm and "device" not in ebm
+
+
+def test_runs_made_with_other_library_defaults_are_retired(tmp_path, monkeypatch):
+    """A changed default of the EBM changes its digest: its runs made before are rerun, the others stay."""
+    import eval.provenance as provenance
+
+    context = make_context("smoke", str(tmp_path), [0, 1])
+    parts = select_parts(build_parts(["table1"], context), ["table1/particle/online"])
+    executor, messages = FakeExecutor(), []
+    run_parts(parts, executor, "ebm-eval first", progress=False, log=messages.append)
+    jobs = parts[0].jobs
+    assert len(jobs) == 4
+    for job in jobs:  # the digest as run_job records it
+        metrics = json.loads((job.run_dir / "metrics.json").read_text())
+        (job.run_dir / "metrics.json").write_text(json.dumps({**metrics, "defaults_digest": defaults_digest(job)}))
+    legacy = next(job for job in jobs if job.agent == "ebm")  # finished before digests were recorded
+    metrics = json.loads((legacy.run_dir / "metrics.json").read_text())
+    (legacy.run_dir / "metrics.json").write_text(json.dumps({**metrics, "defaults_digest": None}))
+    assert all(completed_result(job) is not None for job in jobs)
+
+    original = AGENTS["ebm"].defaults
+    changed = replace(AGENTS["ebm"], defaults=lambda env_id: {**original(env_id), "horizon": 20})
+    monkeypatch.setitem(AGENTS, "ebm", changed)
+    provenance._defaults_digest.cache_clear()
+    try:
+        stale = [job for job in jobs if completed_result(job) is None]
+        executor.ran.clear()
+        run_parts(parts, executor, "ebm-eval second", progress=False, log=messages.append)
+    finally:
+        provenance._defaults_digest.cache_clear()
+    assert stale == [job for job in jobs if job.agent == "ebm" and job != legacy]
+    assert executor.ran == stale
+    assert any("other library defaults" in message for message in messages), messages
