@@ -29,7 +29,7 @@ class ForwardDynamicsModel(nn.Module):
     :param config: the trunk's architecture (an :class:`~ebm_agent.energy.EnergyConfig`; its output options are
         ignored). With ``periodic_inputs`` the periodic dims enter as (sin, cos), as the energy's do.
     :param masked_dims: target dims: zeroed in the input and copied unchanged to the prediction.
-    :param residual: predict s' = s + f(s, a) (True) or s' = f(s, a) as the original (False).
+    :param residual: predict s' = s + f(s, a) (True, the agent's default) or s' = f(s, a) as the original (False).
     :param periodic_dims: periodic state dims (angles); their prediction errors are measured the short way round
         (:meth:`error`).
     :param period: their period.
@@ -41,7 +41,7 @@ class ForwardDynamicsModel(nn.Module):
         action_dim: int,
         config: EnergyConfig | None = None,
         masked_dims: Sequence[int] = (),
-        residual: bool = False,
+        residual: bool = True,
         periodic_dims: Sequence[int] = (),
         period: float = 2.0,
     ) -> None:
@@ -132,7 +132,9 @@ class ActionFFAgent(PlannerAgentBase):
     :param horizon: T, planned actions.
     :param planner_config: :class:`~baselines.action_planner.ActionPlannerConfig` or a dict of its fields.
     :param network: the trunk's :class:`~ebm_agent.energy.EnergyConfig` (same as the EBM's by default).
-    :param residual: predict state differences instead of absolute next states.
+    :param residual: predict the state change s' - s (default) instead of the absolute next state (the original's,
+        ``False``); with absolute predictions the one-step errors on random data are a sizeable part of a move
+        (docs/baselines.md).
     :param clip_sigma: the original Adam's per-element gradient clip; None for plain Adam.
     :param online: :class:`~ebm_agent.config.OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: unused for acting (the plan has actions); kept for API symmetry.
@@ -153,7 +155,7 @@ class ActionFFAgent(PlannerAgentBase):
         horizon: int = 10,
         planner_config: ActionPlannerConfig | dict[str, Any] | None = None,
         network: EnergyConfig | dict[str, Any] | None = None,
-        residual: bool = False,
+        residual: bool = True,
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",

@@ -27,7 +27,7 @@ def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
     assert "first wall" in explain("table1/maze/pretrained", "action-ff")
     assert "untrained agent" in explain("table1/particle/online", "ebm")
     assert "off by one" in explain("table1/particle/online", "action-ff")
-    assert "residual=true" in explain("table1/particle/pretrained", "action-ff")
+    assert "change of state" in explain("table1/reacher/pretrained", "action-ff")
     assert explain("table2/sawyer/online_fixed", "action-ff") == "not investigated yet."
 
 
