@@ -111,3 +111,16 @@ def test_the_report_restores_the_records_and_names_them(tmp_path, capsys):
     assert "| online | particle | EBM | -6.00 ± 0.82 | 3 |" in text
     assert f"kept in `{records}/` (committed)" in text
     assert "restored 3 run(s)" in capsys.readouterr().err
+
+
+def test_records_go_with_the_published_document_only():
+    from eval.cli import build_parser, resolve_experiment_settings
+
+    def records(*argv):
+        return resolve_experiment_settings(build_parser().parse_args(["--report-only", *argv]))["records"]
+
+    assert records() == "docs/records"  # docs/results.md at the paper's scale
+    assert records("--docs", "elsewhere.md") is None
+    assert records("--scale", "smoke") is None
+    assert records("--records", "none") is None
+    assert records("--scale", "smoke", "--records", "my/records") == "my/records"
