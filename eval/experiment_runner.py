@@ -292,9 +292,9 @@ def run_experiments(
     if records:
         _stderr(restore_records(Path(records), out).describe("restored", Path(records), out))
     summary = run_parts(parts, executor, command, progress=progress) if parts else RunSummary()
-    if records:
-        _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
     path = write_results(out, Path(settings["docs"]), settings["scale"], settings["seeds"], records=records)
+    if records:  # after the document, so that the anchors it computed are kept too
+        _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
     print(f"Results document: {path} (from {settings['out']}/)")
     return 0 if summary.ok else 1
 

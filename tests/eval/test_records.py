@@ -124,3 +124,12 @@ def test_records_go_with_the_published_document_only():
     assert records("--scale", "smoke") is None
     assert records("--records", "none") is None
     assert records("--scale", "smoke", "--records", "my/records") == "my/records"
+
+
+def test_the_anchors_the_report_computed_are_recorded(tmp_path):
+    out, records = tmp_path / "runs", tmp_path / "records"
+    _, ebm = particle_online(out)
+    finish(ebm.jobs[0], -5.0)
+    argv = ["--report-only", "-f", str(out), "--docs", str(tmp_path / "r.md"), "--records", str(records), "--no-progress"]
+    assert ebm_eval(argv) == 0
+    assert json.loads((records / "anchors_cache.json").read_text())  # the particle's anchors, computed once
