@@ -292,7 +292,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--records",
         metavar="DIR",
         help="keep the small files of finished runs and figures in DIR, restored into the results folder before "
-        "running or reporting and saved after (default: docs/records for docs/results.md, else none; 'none': off)",
+        "running or reporting and saved after (default: docs/records for docs/results.md from runs/results, else "
+        "none; 'none': off)",
     )
     parser.add_argument("--no-progress", action="store_true", help="hide the progress bars")
     parser.add_argument("-v", "--verbose", type=int, default=0, help="SB3 verbosity of the agents: 0, 1 or 2 (default: 0)")
@@ -539,7 +540,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         "seeds": list(args.seeds) if args.seeds else None,
         "out": out,
         "docs": args.docs or (PAPER_DOC if scale == "paper" else str(Path(out) / "results.md")),
-        "records": _records_dir(args.records, args.docs or (PAPER_DOC if scale == "paper" else None)),
+        "records": _records_dir(args.records, args.docs or (PAPER_DOC if scale == "paper" else None), out),
         "report_only": bool(args.report_only),
         "device": args.device or "auto",
         "jobs": args.jobs or 1,
@@ -552,13 +553,14 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     return settings
 
 
-def _records_dir(flag: str | None, docs: str | None) -> str | None:
-    """The records folder: the flag's, ``docs/records`` beside the published document, or none."""
+def _records_dir(flag: str | None, docs: str | None, out: str) -> str | None:
+    """The records folder: the flag's; ``docs/records`` for the published document made from ``runs/results``;
+    else none (a scratch folder's runs never enter the published records unless asked)."""
     from eval.records import RECORDS_DIR
 
     if flag is not None:
         return None if flag.lower() == "none" else flag
-    return RECORDS_DIR if docs == PAPER_DOC else None
+    return RECORDS_DIR if docs == PAPER_DOC and Path(out) == Path(RESULTS_DIR) else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

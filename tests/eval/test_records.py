@@ -121,6 +121,7 @@ def test_records_go_with_the_published_document_only():
 
     assert records() == "docs/records"  # docs/results.md at the paper's scale
     assert records("--docs", "elsewhere.md") is None
+    assert records("-f", "runs/scratch") is None  # a scratch folder's runs stay out of the published records
     assert records("--scale", "smoke") is None
     assert records("--records", "none") is None
     assert records("--scale", "smoke", "--records", "my/records") == "my/records"
