@@ -514,6 +514,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     """
     from eval.experiments import EXPERIMENTS
     from eval.parts import SCALES
+    from eval.records import default_records
 
     given = [key for key in (*SWEEP_ONLY, *SWEEP_ONLY_MORE) if getattr(args, key, None) is not None]
     if given:
@@ -540,7 +541,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         "seeds": list(args.seeds) if args.seeds else None,
         "out": out,
         "docs": args.docs or (PAPER_DOC if scale == "paper" else str(Path(out) / "results.md")),
-        "records": _records_dir(args.records, args.docs or (PAPER_DOC if scale == "paper" else None), out),
+        "records": default_records(args.records, args.docs or (PAPER_DOC if scale == "paper" else None), out),
         "report_only": bool(args.report_only),
         "device": args.device or "auto",
         "jobs": args.jobs or 1,
@@ -551,16 +552,6 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     }
     _check_ray_settings(settings)
     return settings
-
-
-def _records_dir(flag: str | None, docs: str | None, out: str) -> str | None:
-    """The records folder: the flag's; ``docs/records`` for the published document made from ``runs/results``;
-    else none (a scratch folder's runs never enter the published records unless asked)."""
-    from eval.records import RECORDS_DIR
-
-    if flag is not None:
-        return None if flag.lower() == "none" else flag
-    return RECORDS_DIR if docs == PAPER_DOC and Path(out) == Path(RESULTS_DIR) else None
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -22,18 +22,20 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import sys
-import tempfile
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ebm_agent.checkpoint import atomic_path
 from eval.provenance import SESSIONS_FILE, read_metrics
 
 RECORDS_DIR = "docs/records"
 """The records of the published document (``docs/results.md``)."""
+
+PUBLISHED = ("docs/results.md", "runs/results")
+"""The published document and the results folder it is made from: the pair that uses ``RECORDS_DIR`` by default."""
 
 RUN_FILES = ("metrics.json", "evaluations.npz", "provenance.json", "config.yaml")
 """The files of a finished run that are recorded (no model, no TensorBoard log)."""
@@ -77,6 +79,10 @@ def _visible(relative: Path) -> bool:
     return not any(".replaced-" in part or part.startswith(".") or part in SKIPPED_DIRS for part in relative.parts)
 
 
+def _is_finished(run_dir: Path) -> bool:
+    return (run_dir / "evaluations.npz").exists() and read_metrics(run_dir) is not None
+
+
 def finished_runs(folder: Path) -> Iterator[Path]:
     """The finished run folders under a results or records folder.
 
@@ -86,7 +92,7 @@ def finished_runs(folder: Path) -> Iterator[Path]:
     for metrics in sorted(Path(folder).rglob("metrics.json")):
         run_dir = metrics.parent
         relative = run_dir.relative_to(folder)
-        if _visible(relative) and (run_dir / "evaluations.npz").exists() and read_metrics(run_dir) is not None:
+        if _visible(relative) and _is_finished(run_dir):
             yield relative
 
 
@@ -103,23 +109,13 @@ def finished_figures(folder: Path) -> Iterator[Path]:
 
 
 def _copy_atomic(source: Path, target: Path) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    os.close(handle)
-    try:
+    with atomic_path(target) as temporary:
         shutil.copyfile(source, temporary)
-        os.replace(temporary, target)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
 
 
 def _write_atomic(target: Path, text: str) -> None:
-    target.parent.mkdir(parents=True, exist_ok=True)
-    handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.", suffix=".tmp")
-    with os.fdopen(handle, "w") as stream:
-        stream.write(text)
-    os.replace(temporary, target)
+    with atomic_path(target) as temporary:
+        temporary.write_text(text)
 
 
 def _figure_files(folder: Path) -> list[Path]:
@@ -146,13 +142,8 @@ def _copy_figure(source: Path, target: Path) -> None:
 
 def _merge_sessions(source: Path, target: Path) -> None:
     """Append to ``target/sessions.jsonl`` the lines of ``source``'s that it lacks, in order of start."""
-    lines: dict[str, str] = {}
-    for folder in (target, source):
-        path = folder / SESSIONS_FILE
-        if path.exists():
-            for line in path.read_text().splitlines():
-                if line.strip():
-                    lines.setdefault(line, line)
+    texts = [(folder / SESSIONS_FILE).read_text() for folder in (target, source) if (folder / SESSIONS_FILE).exists()]
+    lines = dict.fromkeys(line for text in texts for line in text.splitlines() if line.strip())  # ordered, unique
     if not lines:
         return
 
@@ -175,6 +166,21 @@ def _merge_anchors(source: Path, target: Path) -> None:
             continue
     if merged:
         _write_atomic(target / ANCHORS_CACHE, json.dumps(merged, indent=2))
+
+
+def default_records(flag: str | None, docs: str | Path | None, out: str | Path) -> str | None:
+    """The records folder a command uses: the flag's (``"none"``: none); else ``RECORDS_DIR`` when it writes the
+    published document from ``runs/results``; else none, so that a scratch folder's runs never enter the records.
+
+    :param flag: ``--records`` as given, or None.
+    :param docs: the document the command writes, or None.
+    :param out: its results folder.
+    :return: the records folder, or None.
+    """
+    if flag is not None:
+        return None if flag.lower() == "none" else flag
+    published = docs is not None and Path(docs) == Path(PUBLISHED[0]) and Path(out) == Path(PUBLISHED[1])
+    return RECORDS_DIR if published else None
 
 
 def save_records(out_dir: Path, records_dir: Path = Path(RECORDS_DIR)) -> RecordsSummary:
@@ -212,7 +218,7 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
         return summary
     for relative in finished_runs(records_dir):
         target = out_dir / relative
-        if (target / "evaluations.npz").exists() and read_metrics(target) is not None:
+        if _is_finished(target):
             summary.kept.append(relative.as_posix())
             continue
         for name in ("model.zip", "error.txt"):  # leftovers of an unfinished run would contradict the record
@@ -257,9 +263,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 __all__ = [
     "FIGURE_SUFFIXES",
     "MAX_FIGURE_FILE_BYTES",
+    "PUBLISHED",
     "RECORDS_DIR",
     "RUN_FILES",
     "RecordsSummary",
+    "default_records",
     "finished_figures",
     "finished_runs",
     "main",

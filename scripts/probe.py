@@ -56,7 +56,10 @@ def main(argv: list[str] | None = None) -> list[float]:
     label = "_".join(f"{key}-{value}" for key, value in changes.items()) or "unchanged"
     out = f"{args.out}/{args.part}/{args.agent}/{re.sub(r'[^A-Za-z0-9_.-]+', '', label)}"
     experiment = args.part.split("/")[0]
-    part = select_parts(build_parts([experiment], make_context(args.scale, out)), [args.part])[0]
+    try:
+        part = select_parts(build_parts([experiment], make_context(args.scale, out)), [args.part])[0]
+    except (KeyError, ValueError) as error:  # an unknown experiment, part or scale
+        parser.error(f"{args.part!r} at scale {args.scale!r}: {error}")
     cell = next((cell for cell in part.cells if cell.agent == args.agent), None)
     if cell is None:
         parser.error(f"{args.part} has no cell of agent {args.agent!r}; its agents: {[c.agent for c in part.cells]}")

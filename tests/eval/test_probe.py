@@ -37,3 +37,9 @@ def test_a_change_needs_a_key_and_a_value(probe):
     assert probe.parse_change("cost={goal_weight: 0.1}") == ("cost", {"goal_weight": 0.1})
     with pytest.raises(Exception, match="KEY=VALUE"):
         probe.parse_change("residual")
+
+
+def test_an_unknown_part_is_a_usage_error(probe, tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        probe.main(["table9/particle/online", "ebm", "--scale", "smoke", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and "unknown experiment" in capsys.readouterr().err

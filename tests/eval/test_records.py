@@ -12,7 +12,7 @@ from eval.experiment_runner import plan_jobs
 from eval.experiments import build_parts, make_context
 from eval.jobs import Job
 from eval.provenance import append_session, job_fingerprint, write_provenance
-from eval.records import finished_runs, main, restore_records, save_records
+from eval.records import default_records, finished_runs, main, restore_records, save_records
 from eval.results_doc import collect_cell
 
 
@@ -125,6 +125,7 @@ def test_records_go_with_the_published_document_only():
     assert records("--scale", "smoke") is None
     assert records("--records", "none") is None
     assert records("--scale", "smoke", "--records", "my/records") == "my/records"
+    assert default_records(None, "docs/results.md", "./runs/results") == "docs/records"  # the module command agrees
 
 
 def test_the_anchors_the_report_computed_are_recorded(tmp_path):
