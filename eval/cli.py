@@ -286,7 +286,7 @@ def build_parser() -> argparse.ArgumentParser:
     experiments.add_argument(
         "--docs",
         metavar="PATH",
-        help=f"the results document (default: {PAPER_DOC} at the paper's scale, else <out>/results.md)",
+        help=f"the results document (default: {PAPER_DOC} at the paper's scale from {RESULTS_DIR}, else <out>/results.md)",
     )
     experiments.add_argument(
         "--records",
@@ -514,7 +514,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     """
     from eval.experiments import EXPERIMENTS
     from eval.parts import SCALES
-    from eval.records import default_records
+    from eval.records import default_docs, default_records
 
     given = [key for key in (*SWEEP_ONLY, *SWEEP_ONLY_MORE) if getattr(args, key, None) is not None]
     if given:
@@ -540,8 +540,8 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         "scale": scale,
         "seeds": list(args.seeds) if args.seeds else None,
         "out": out,
-        "docs": args.docs or (PAPER_DOC if scale == "paper" else str(Path(out) / "results.md")),
-        "records": default_records(args.records, args.docs or (PAPER_DOC if scale == "paper" else None), out),
+        "docs": default_docs(args.docs, scale, out),
+        "records": default_records(args.records, default_docs(args.docs, scale, out), out),
         "report_only": bool(args.report_only),
         "device": args.device or "auto",
         "jobs": args.jobs or 1,

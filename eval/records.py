@@ -168,6 +168,23 @@ def _merge_anchors(source: Path, target: Path) -> None:
         _write_atomic(target / ANCHORS_CACHE, json.dumps(merged, indent=2))
 
 
+def default_docs(flag: str | None, scale: str, out: str | Path) -> str:
+    """The results document a command writes: the flag's; else the published ``docs/results.md`` for the paper's
+    scale reported from ``runs/results``; else ``<out>/results.md``, so that a scratch folder never overwrites the
+    published document.
+
+    :param flag: ``--docs`` as given, or None.
+    :param scale: the scale reported.
+    :param out: the results folder.
+    :return: the document's path.
+    """
+    if flag:
+        return flag
+    if scale == "paper" and Path(out) == Path(PUBLISHED[1]):
+        return PUBLISHED[0]
+    return str(Path(out) / "results.md")
+
+
 def default_records(flag: str | None, docs: str | Path | None, out: str | Path) -> str | None:
     """The records folder a command uses: the flag's (``"none"``: none); else ``RECORDS_DIR`` when it writes the
     published document from ``runs/results``; else none, so that a scratch folder's runs never enter the records.
@@ -267,6 +284,7 @@ __all__ = [
     "RECORDS_DIR",
     "RUN_FILES",
     "RecordsSummary",
+    "default_docs",
     "default_records",
     "finished_figures",
     "finished_runs",

@@ -37,7 +37,7 @@ from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
 from eval.parts import SCALES, Cell, Part, format_duration
 from eval.provenance import describe_machine, is_current_run, read_metrics, read_provenance, read_sessions
-from eval.records import default_records, restore_records
+from eval.records import default_docs, default_records, restore_records
 
 MIN_SEEDS_FOR_IQM = 3
 
@@ -489,14 +489,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("-f", "--out", default="runs/results", help="the results folder (default: runs/results)")
     parser.add_argument("--scale", default="paper", choices=list(SCALES), help="the scale reported (default: paper)")
     parser.add_argument("--seeds", nargs="+", type=int, help="default seeds of each cell (default: the scale's)")
-    parser.add_argument("--docs", help="the document (default: docs/results.md at the paper's scale, else <out>/results.md)")
+    parser.add_argument("--docs", help="the document (default: docs/results.md at the paper's scale from runs/results, else <out>/results.md)")
     parser.add_argument(
         "--records",
         help="restore finished runs from this records folder first (default: docs/records for docs/results.md made "
         "from runs/results; 'none': off)",
     )
     args = parser.parse_args(argv)
-    docs = args.docs or ("docs/results.md" if args.scale == "paper" else str(Path(args.out) / "results.md"))
+    docs = default_docs(args.docs, args.scale, args.out)
     records = default_records(args.records, docs, args.out)
     if records:
         print(restore_records(Path(records), Path(args.out)).describe("restored", Path(records), Path(args.out)))

@@ -12,7 +12,7 @@ from eval.experiment_runner import plan_jobs
 from eval.experiments import build_parts, make_context
 from eval.jobs import Job
 from eval.provenance import append_session, job_fingerprint, write_provenance
-from eval.records import default_records, finished_runs, main, restore_records, save_records
+from eval.records import default_docs, default_records, finished_runs, main, restore_records, save_records
 from eval.results_doc import collect_cell
 
 
@@ -126,6 +126,19 @@ def test_records_go_with_the_published_document_only():
     assert records("--records", "none") is None
     assert records("--scale", "smoke", "--records", "my/records") == "my/records"
     assert default_records(None, "docs/results.md", "./runs/results") == "docs/records"  # the module command agrees
+
+
+def test_a_scratch_folder_never_overwrites_the_published_document():
+    from eval.cli import build_parser, resolve_experiment_settings
+
+    def docs(*argv):
+        return resolve_experiment_settings(build_parser().parse_args(["--report-only", *argv]))["docs"]
+
+    assert docs() == "docs/results.md"
+    assert docs("-f", "runs/scratch") == "runs/scratch/results.md"  # the paper's scale, but not the published runs
+    assert docs("--scale", "smoke") == "runs/results/results.md"
+    assert docs("-f", "runs/scratch", "--docs", "docs/results.md") == "docs/results.md"  # asked for explicitly
+    assert default_docs(None, "paper", "./runs/results") == "docs/results.md"  # the module command agrees
 
 
 def test_the_anchors_the_report_computed_are_recorded(tmp_path):
