@@ -489,7 +489,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("-f", "--out", default="runs/results", help="the results folder (default: runs/results)")
     parser.add_argument("--scale", default="paper", choices=list(SCALES), help="the scale reported (default: paper)")
     parser.add_argument("--seeds", nargs="+", type=int, help="default seeds of each cell (default: the scale's)")
-    parser.add_argument("--docs", help="the document (default: docs/results.md at the paper's scale from runs/results, else <out>/results.md)")
+    parser.add_argument(
+        "--docs", help="the document (default: docs/results.md at the paper's scale from runs/results, else <out>/results.md)"
+    )
     parser.add_argument(
         "--records",
         help="restore finished runs from this records folder first (default: docs/records for docs/results.md made "

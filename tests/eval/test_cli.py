@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from eval.cli import build_parser, main, parse_value, resolve_settings
+from eval.cli import main, resolve_settings
+from eval.flags import build_parser, parse_value
 from eval.presets import available_presets, load_preset
 
 REPO = Path(__file__).resolve().parents[2]

@@ -19,8 +19,9 @@ import numpy as np
 import pytest
 import yaml
 
-from eval.cli import build_parser, executor_options, main, resolve_settings
+from eval.cli import executor_options, main, resolve_settings
 from eval.executors import LocalExecutor, executor_from_name
+from eval.flags import build_parser
 from eval.jobs import Job, JobResult
 
 REPO = Path(__file__).resolve().parents[2]
@@ -78,7 +79,8 @@ def ray_local():
 def test_nothing_imports_ray_without_the_ray_executor():
     code = (
         "import sys, eval, eval.cli, eval.executors, eval.jobs\n"
-        "from eval.cli import build_parser, executor_options, resolve_settings\n"
+        "from eval.cli import executor_options, resolve_settings\n"
+        "from eval.flags import build_parser\n"
         "settings = resolve_settings(build_parser().parse_args(['--config', 'smoke']))\n"
         "eval.executors.executor_from_name(settings['executor'], **executor_options(settings))\n"
         "assert 'ray' not in sys.modules, sorted(m for m in sys.modules if m.startswith('ray'))\n"

@@ -114,7 +114,8 @@ def test_the_report_restores_the_records_and_names_them(tmp_path, capsys):
 
 
 def test_records_go_with_the_published_document_only():
-    from eval.cli import build_parser, resolve_experiment_settings
+    from eval.cli import resolve_experiment_settings
+    from eval.flags import build_parser
 
     def records(*argv):
         return resolve_experiment_settings(build_parser().parse_args(["--report-only", *argv]))["records"]
@@ -129,7 +130,8 @@ def test_records_go_with_the_published_document_only():
 
 
 def test_a_scratch_folder_never_overwrites_the_published_document():
-    from eval.cli import build_parser, resolve_experiment_settings
+    from eval.cli import resolve_experiment_settings
+    from eval.flags import build_parser
 
     def docs(*argv):
         return resolve_experiment_settings(build_parser().parse_args(["--report-only", *argv]))["docs"]
