@@ -1,31 +1,36 @@
 """Crash-safe checkpoints for SB3 agents: atomic saves, resumable training state and a weights-only load path.
 
-A checkpoint is SB3's ordinary zip (``data`` + ``*.pth`` state dicts, so ``Agent.load`` reads it) with two extra
-members that SB3 ignores: ``training_state.npz`` (replay buffers, noise-generator states; numpy arrays only, read
-with ``allow_pickle=False``) and ``training_state.json`` (sizes, positions and numpy bit-generator states). Every
-file is written to a temporary name in the target folder and moved into place with ``os.replace``, so a crash
-leaves either the old file or the new one, never half of one. See docs/security.md for which loader to trust.
+The mixin gives an agent ``save_checkpoint``, ``load_checkpoint`` and ``load_weights_only``; the file format and its
+atomic writes are in ``ebm_agent.checkpoint_files``, the callback that saves during ``learn`` in
+``ebm_agent.callbacks``. See docs/security.md for which loader to trust.
 """
 
 from __future__ import annotations
 
-import contextlib
 import io
 import json
-import os
 import pathlib
 import pickle
-import uuid
 import zipfile
 import zlib
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import numpy as np
 import torch
-from stable_baselines3.common.callbacks import CheckpointCallback
 from stable_baselines3.common.type_aliases import GymEnv
 from stable_baselines3.common.utils import get_device
+
+from ebm_agent.checkpoint_files import (
+    FORMAT_VERSION,
+    META_MEMBER,
+    STATE_MEMBER,
+    atomic_path,
+    check_checkpoint_file,
+    corrupted_checkpoint,
+    read_training_state,
+    zip_path,
+)
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -36,12 +41,6 @@ else:
 
 SelfCheckpointMixin = TypeVar("SelfCheckpointMixin", bound="CheckpointMixin")
 
-STATE_MEMBER = "training_state.npz"
-"""Zip member holding the numpy arrays of the training state."""
-META_MEMBER = "training_state.json"
-"""Zip member holding the scalar training state (sizes, positions, bit-generator states) as JSON."""
-FORMAT_VERSION = 1
-"""Version of the two extra members; bumped when their layout changes."""
 _NOT_STATE_DICTS = ("pytorch_variables.pth", "tensors.pth")  # SB3's torch variables, not module/optimiser states
 
 
@@ -199,10 +198,10 @@ class CheckpointMixin(_MixinBase):
                     "options), or train a new agent on this env."
                 ) from error
             if isinstance(error, json.JSONDecodeError) or "wasn't a zip-file" in message:
-                raise _corrupted(source, error) from error
+                raise corrupted_checkpoint(source, error) from error
             raise
         except (zipfile.BadZipFile, EOFError, zlib.error, pickle.UnpicklingError) as error:
-            raise _corrupted(source, error) from error
+            raise corrupted_checkpoint(source, error) from error
         except RuntimeError as error:
             if "loading state_dict" in str(error):
                 raise ValueError(
@@ -210,7 +209,7 @@ class CheckpointMixin(_MixinBase):
                     f"({str(error).splitlines()[0]}). Do not override network or planner settings when loading."
                 ) from error
             if "PytorchStreamReader" in str(error) or "zip archive" in str(error):
-                raise _corrupted(source, error) from error
+                raise corrupted_checkpoint(source, error) from error
             raise
 
     @classmethod
@@ -310,7 +309,7 @@ class CheckpointMixin(_MixinBase):
                         "tampered with: do not open it with load()."
                     ) from error
                 except (EOFError, RuntimeError, zlib.error, zipfile.BadZipFile) as error:
-                    raise _corrupted(source, error) from error
+                    raise corrupted_checkpoint(source, error) from error
         for name in expected:
             module = _get_attribute(model, name)
             if isinstance(module, torch.nn.Module):
@@ -325,176 +324,7 @@ class CheckpointMixin(_MixinBase):
         return model
 
 
-class ResumableCheckpointCallback(CheckpointCallback):
-    """Save a resumable checkpoint every ``save_freq`` callback calls and keep ``<prefix>_latest.zip`` pointing at it.
-
-    Each checkpoint is ``<save_path>/<prefix>_<num_timesteps>_steps.zip`` (written atomically by
-    :meth:`CheckpointMixin.save_checkpoint`); ``<prefix>_latest.zip`` is then replaced atomically by a hard link
-    to it (a copy where links are not supported). A run killed at any moment leaves the latest checkpoint whole.
-    Resume with ``Agent.load_checkpoint(callback.latest_path, env)``.
-
-    :param save_freq: callback calls between checkpoints (one call per vectorised env step, i.e. ``n_envs``
-        transitions, as SB3's ``CheckpointCallback``).
-    :param save_path: folder of the checkpoints (created if needed).
-    :param name_prefix: file name prefix.
-    :param keep_last: number of numbered checkpoints to keep (older ones are deleted); None keeps all.
-    :param verbose: 2 prints each save.
-    """
-
-    def __init__(
-        self,
-        save_freq: int,
-        save_path: str | pathlib.Path,
-        name_prefix: str = "checkpoint",
-        keep_last: int | None = None,
-        verbose: int = 0,
-    ) -> None:
-        if isinstance(save_freq, bool) or not isinstance(save_freq, int | np.integer) or save_freq < 1:
-            raise ValueError(f"save_freq must be a positive int (callback calls between checkpoints), got {save_freq!r}.")
-        if keep_last is not None and (isinstance(keep_last, bool) or not isinstance(keep_last, int) or keep_last < 1):
-            raise ValueError(f"keep_last must be None (keep every checkpoint) or an int >= 1, got {keep_last!r}.")
-        super().__init__(int(save_freq), str(save_path), name_prefix=name_prefix, verbose=verbose)
-        self.keep_last = keep_last
-        self.latest_path = pathlib.Path(save_path) / f"{name_prefix}_latest.zip"
-        self.saved_paths: list[pathlib.Path] = []
-
-    def _init_callback(self) -> None:
-        super()._init_callback()
-        if not callable(getattr(self.model, "save_checkpoint", None)):
-            raise TypeError(
-                f"ResumableCheckpointCallback needs an agent with save_checkpoint (CheckpointMixin); "
-                f"{type(self.model).__name__} has none. Use SB3's CheckpointCallback(save_replay_buffer=True) for it."
-            )
-
-    def _on_step(self) -> bool:
-        if self.n_calls % self.save_freq == 0:
-            path = self.model.save_checkpoint(self._checkpoint_path(extension="zip"))  # type: ignore[attr-defined]
-            _replace_with_link(path, self.latest_path)
-            self.saved_paths.append(path)
-            if self.keep_last is not None:
-                while len(self.saved_paths) > self.keep_last:
-                    with contextlib.suppress(FileNotFoundError):
-                        self.saved_paths.pop(0).unlink()
-            if self.verbose >= 2:
-                print(f"Saving resumable checkpoint to {path}")
-        return True
-
-
-def latest_checkpoint(save_path: str | pathlib.Path, name_prefix: str = "checkpoint") -> pathlib.Path | None:
-    """The ``<prefix>_latest.zip`` a :class:`ResumableCheckpointCallback` keeps, if one was written.
-
-    :param save_path: the callback's folder.
-    :param name_prefix: the callback's prefix.
-    :return: the path, or None when no checkpoint was saved yet.
-    """
-    path = pathlib.Path(save_path) / f"{name_prefix}_latest.zip"
-    return path if path.is_file() else None
-
-
-def zip_path(path: str | pathlib.Path) -> pathlib.Path:
-    """The file SB3's ``save`` writes for ``path``: ``.zip`` is appended when the name has no suffix.
-
-    :param path: the path given to ``save``.
-    :return: the file path.
-    """
-    file = pathlib.Path(path)
-    return file if file.suffix else pathlib.Path(f"{file}.zip")
-
-
-@contextlib.contextmanager
-def atomic_path(target: str | pathlib.Path) -> Iterator[pathlib.Path]:
-    """Yield a temporary path beside ``target``; on success it is synced and renamed onto ``target``.
-
-    On any exception the temporary file is deleted and ``target`` keeps its old content (or stays absent).
-
-    :param target: the final file.
-    :return: a context manager yielding the temporary path to write.
-    """
-    target = pathlib.Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    # Same folder as the target: os.replace is only atomic within one file system.
-    temporary = target.with_name(f".{target.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        yield temporary
-        with open(temporary, "rb+") as handle:
-            os.fsync(handle.fileno())
-        os.replace(temporary, target)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
-
-
-def check_checkpoint_file(path: str | pathlib.Path) -> pathlib.Path:
-    """Resolve a saved model's path like SB3 and verify the zip before anything is deserialised.
-
-    Every member's CRC is checked, so a truncated download or a half-copied file is reported here, by name,
-    instead of as an error deep inside ``zipfile`` or ``torch.load``.
-
-    :param path: the file (``.zip`` may be omitted).
-    :return: the existing file.
-    :raises FileNotFoundError: when neither ``path`` nor ``path.zip`` exists.
-    :raises ValueError: for a file that is not a complete zip or lacks SB3's ``data`` member.
-    """
-    file = pathlib.Path(path)
-    if not file.is_file() and pathlib.Path(f"{file}.zip").is_file():
-        file = pathlib.Path(f"{file}.zip")
-    if not file.is_file():
-        raise FileNotFoundError(f"No saved model at {path} (nor {path}.zip).")
-    try:
-        with zipfile.ZipFile(file) as archive:
-            broken = archive.testzip()
-            names = set(archive.namelist())
-    except (zipfile.BadZipFile, zlib.error, EOFError, OSError, ValueError) as error:
-        raise _corrupted(file, error) from error
-    if broken is not None:
-        raise _corrupted(file, f"member {broken!r} fails its CRC check")
-    if "data" not in names:
-        raise ValueError(
-            f"{file} is a zip but not a saved SB3 model (no 'data' member; it has {sorted(names)[:5]}). Pass the .zip "
-            "written by agent.save or agent.save_checkpoint."
-        )
-    return file
-
-
-def read_training_state(path: str | pathlib.Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """Read the extra members of a checkpoint without unpickling anything (``np.load(allow_pickle=False)``, JSON).
-
-    :param path: a file written by :meth:`CheckpointMixin.save_checkpoint`.
-    :return: (arrays by name, metadata).
-    :raises ValueError: for a model saved with plain ``save`` or an unreadable training state.
-    """
-    file = check_checkpoint_file(path)
-    with zipfile.ZipFile(file) as archive:
-        names = set(archive.namelist())
-        if STATE_MEMBER not in names or META_MEMBER not in names:
-            raise ValueError(
-                f"{file} has no training state: it was written by save(), not save_checkpoint(). Load it with "
-                "Agent.load(path, env) (replay buffers then start empty), or resume from a file written by "
-                "save_checkpoint / ResumableCheckpointCallback."
-            )
-        try:
-            meta = json.loads(archive.read(META_MEMBER).decode())
-            with np.load(io.BytesIO(archive.read(STATE_MEMBER)), allow_pickle=False) as npz:
-                arrays = {key: npz[key] for key in npz.files}
-        except (ValueError, OSError, zipfile.BadZipFile, EOFError) as error:
-            raise _corrupted(file, error) from error
-    if meta.get("format") != FORMAT_VERSION:
-        raise ValueError(
-            f"{file} has training-state format {meta.get('format')!r}, this version reads {FORMAT_VERSION}; resume it "
-            "with the ebm-agent version that wrote it."
-        )
-    return arrays, meta
-
-
 # ---------------------------------------------------------------------- helpers
-def _corrupted(path: Any, cause: Any) -> ValueError:
-    return ValueError(
-        f"The checkpoint file {path} is truncated or corrupted ({cause}). Use an earlier checkpoint (e.g. the "
-        "<prefix>_latest.zip that ResumableCheckpointCallback keeps) or save the model again."
-    )
-
-
 def _split_state(prefix: str, state: dict[str, Any], arrays: dict[str, np.ndarray]) -> dict[str, Any]:
     """Move the array values of ``state`` into ``arrays`` under ``prefix.key``; return the rest (JSON-able)."""
     rest: dict[str, Any] = {}
@@ -546,31 +376,4 @@ def _check_state_dict(mine: dict[str, torch.Tensor], saved: Any, where: str) -> 
         )
 
 
-def _replace_with_link(source: pathlib.Path, link: pathlib.Path) -> None:
-    """Point ``link`` at ``source``'s content atomically (hard link, or a copy where links are unsupported)."""
-    temporary = link.with_name(f".{link.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
-        try:
-            os.link(source, temporary)
-        except OSError:
-            with open(source, "rb") as reader, open(temporary, "wb") as writer:
-                while chunk := reader.read(1 << 20):
-                    writer.write(chunk)
-                writer.flush()
-                os.fsync(writer.fileno())
-        os.replace(temporary, link)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
-
-
-__all__ = [
-    "CheckpointMixin",
-    "ResumableCheckpointCallback",
-    "atomic_path",
-    "check_checkpoint_file",
-    "latest_checkpoint",
-    "read_training_state",
-    "zip_path",
-]
+__all__ = ["CheckpointMixin"]

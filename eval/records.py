@@ -28,7 +28,7 @@ from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ebm_agent.checkpoint import atomic_path
+from ebm_agent.checkpoint_files import atomic_path
 from eval.provenance import SESSIONS_FILE, read_metrics
 
 RECORDS_DIR = "docs/records"

@@ -22,7 +22,9 @@ import envs  # noqa: F401  (registers the ids)
 from baselines.action_ff import ActionFFAgent
 from baselines.random_agent import RandomAgent
 from ebm_agent import EBMPlannerAgent
-from ebm_agent.checkpoint import CheckpointMixin, ResumableCheckpointCallback, latest_checkpoint, read_training_state
+from ebm_agent.callbacks import ResumableCheckpointCallback, latest_checkpoint
+from ebm_agent.checkpoint import CheckpointMixin
+from ebm_agent.checkpoint_files import read_training_state
 
 FAST_KWARGS = {
     EBMPlannerAgent: {
