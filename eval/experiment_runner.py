@@ -286,7 +286,9 @@ def run_experiments(
     from eval.results_doc import write_results
 
     if settings["experiments"] == ["list"]:
-        print(describe_experiments(make_context(settings["scale"], settings["out"], settings["seeds"])))
+        context = make_context(settings["scale"], settings["out"], settings["seeds"])
+        records = settings.get("records")
+        print(describe_experiments(context, [settings["out"], *([records] if records else [])]))
         return 0
     out, records = Path(settings["out"]), settings.get("records")
     if records:

@@ -26,6 +26,7 @@ from dataclasses import replace
 from fnmatch import fnmatchcase
 from pathlib import Path
 
+from eval.estimates import estimate_job_seconds, estimate_part_seconds, format_duration, measured_part_cost
 from eval.jobs import Job
 from eval.parts import (
     SCALES,
@@ -33,10 +34,7 @@ from eval.parts import (
     Context,
     Experiment,
     Part,
-    estimate_job_seconds,
-    estimate_part_seconds,
     figure_part,
-    format_duration,
     make_cell,
     table_part,
 )
@@ -313,13 +311,18 @@ def make_context(scale: str, out_dir: str, seeds: Sequence[int] | None = None, d
     return Context(SCALES[scale], str(out_dir), None if seeds is None else tuple(seeds), device)
 
 
-def describe_experiments(context: Context) -> str:
-    """The text of ``ebm-eval --experiment list``: experiments, their parts, runs and estimated cost.
+def describe_experiments(context: Context, measured_from: Sequence[str | Path] = ()) -> str:
+    """The text of ``ebm-eval --experiment list``: experiments, their parts, runs, estimated and measured cost.
 
     :param context: scale, folder, seeds.
+    :param measured_from: results or records folders whose finished runs and figures give measured times.
     :return: the text.
     """
-    lines = [f"Experiments at scale {context.scale.name!r} (estimated CPU time of one process; rough):", ""]
+    lines = [
+        f"Experiments at scale {context.scale.name!r} (CPU time of one process: a rough estimate, and the measured "
+        "wall time of the finished runs, where there are any; --jobs N divides the wall time of runs):",
+        "",
+    ]
     unique_jobs: dict[Path, Job] = {}
     figures = 0.0
     for experiment in EXPERIMENTS.values():
@@ -332,7 +335,9 @@ def describe_experiments(context: Context) -> str:
         for part in parts:
             what = f"figure {part.figure}" if part.figure else f"{len(part.jobs)} runs"
             seeds = " ".join(map(str, part.seeds))
-            lines.append(f"  {part.name:<46} {what:<32} seeds {seeds:<10} ~{format_duration(estimate_part_seconds(part))}")
+            line = f"  {part.name:<46} {what:<32} seeds {seeds:<10} ~{format_duration(estimate_part_seconds(part)):<7}"
+            measured = measured_part_cost(part, measured_from) if measured_from else None
+            lines.append(f"{line} {measured.describe()}" if measured else line.rstrip())
     total = figures + sum(estimate_job_seconds(job) for job in unique_jobs.values())
     lines += [
         "",

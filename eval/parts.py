@@ -7,7 +7,6 @@ and is reported on its own) and experiments, with a rough cost estimate of each 
 
 from __future__ import annotations
 
-import math
 import shlex
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -309,80 +308,6 @@ def figure_part(context: Context, experiment: str, name: str, figure: str, paper
     return Part(name, experiment, context.scale.name, context.out_dir, seeds, figure=figure, paper=dict(paper or {}))
 
 
-SECONDS_PER_STEP = {"particle": 0.008, "maze": 0.008, "reacher": 0.01, "sawyer": 0.03}
-"""Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting: docs/benchmarks.md
-measured 123 transitions/s for the EBM on the particle (1 process, 2 threads); the others are scaled guesses."""
-
-PPO_SECONDS_PER_STEP = 0.001
-"""Rough CPU seconds per PPO transition (docs/benchmarks.md: about 2,000 transitions/s on the particle)."""
-
-SECONDS_PER_OFFLINE_UPDATE = {"ebm": 0.02, "action-ff": 0.003}
-"""Rough CPU seconds per ``learn_offline`` minibatch of 256."""
-
-FIGURE_SECONDS_PER_SEED = {
-    "obstacle_generalisation": 900.0,
-    "plan_diversity": 500.0,
-    "reacher_directions": 600.0,
-    "maze_exploration": 500.0,
-    "sawyer_exploration": 1800.0,
-    "energy_maps": 900.0,
-}
-"""Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents)."""
-
-
-def _episode_length(job: Job) -> int:
-    import gymnasium as gym
-
-    steps = job.env_kwargs.get("max_episode_steps")
-    if steps is None:
-        spec = gym.spec(job.env_id)
-        steps = spec.max_episode_steps if spec is not None else 1000
-    return int(steps or 1000)
-
-
-def estimate_job_seconds(job: Job) -> float:
-    """A rough CPU-seconds estimate of one job (learning, its directed dataset if any, evaluations).
-
-    :param job: the job.
-    :return: seconds.
-    """
-    per_step = PPO_SECONDS_PER_STEP if job.agent == "ppo" else SECONDS_PER_STEP.get(job.env_short, 0.01)
-    act = 0.0001 if job.agent == "ppo" else per_step
-    episode = _episode_length(job)
-    extra = 1 + len(job.extra_evaluations)
-    if job.mode == "online":
-        evaluations = max(job.timesteps // max(job.eval_freq, 1), 1)
-        return job.timesteps * per_step + (evaluations + extra - 1) * job.eval_episodes * episode * act
-    sequential = job.dataset == "directed+sequential"
-    epochs = job.offline_kwargs.get("epochs", 1 if sequential else 10)
-    repeat = job.offline_kwargs.get("repeat", 100) if sequential else 1
-    batch = job.offline_kwargs.get("batch_size", 256)
-    updates = epochs * math.ceil(job.timesteps * repeat / batch)
-    collect = 0.0 if job.dataset == "random" else job.timesteps * SECONDS_PER_STEP.get(job.env_short, 0.01) / 2
-    return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + collect + extra * job.eval_episodes * episode * act
-
-
-def estimate_part_seconds(part: Part) -> float:
-    """A rough CPU-seconds estimate of a part (one process; ``--jobs N`` divides the wall time).
-
-    :param part: the part.
-    :return: seconds.
-    """
-    if part.figure is not None:
-        factor = 1.0 if part.scale == "paper" else 0.01
-        return FIGURE_SECONDS_PER_SEED.get(part.figure, 600.0) * len(part.seeds) * factor
-    return sum(estimate_job_seconds(job) for job in part.jobs)
-
-
-def format_duration(seconds: float) -> str:
-    """``45 s``, ``12 min``, ``3.4 h``."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.0f} min"
-    return f"{seconds / 3600:.1f} h"
-
-
 __all__ = [
     "AGENT_LABELS",
     "SCALES",
@@ -392,10 +317,7 @@ __all__ = [
     "Part",
     "Scale",
     "default_seeds",
-    "estimate_job_seconds",
-    "estimate_part_seconds",
     "figure_part",
-    "format_duration",
     "make_cell",
     "preset_hyperparams",
     "table_part",

@@ -33,9 +33,10 @@ from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
 from eval.claims import evaluate_claims, render_claims
 from eval.differences import find_differences, render_differences
+from eval.estimates import format_duration
 from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
-from eval.parts import SCALES, Cell, Part, format_duration
+from eval.parts import SCALES, Cell, Part
 from eval.provenance import describe_machine, is_current_run, read_metrics, read_provenance, read_sessions
 from eval.records import default_docs, default_records, restore_records
 

@@ -1,0 +1,166 @@
+"""What the paper's experiments cost: rough CPU-time estimates before they run, measured wall times after.
+
+``ebm-eval --experiment list`` prints both; the estimates only order and size the work, the measured times (from
+the runs' ``metrics.json`` and the figures' ``provenance.json``, in the results folder or the records) are what a
+plan should trust.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from eval.jobs import Job
+from eval.parts import Part
+
+SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.08}
+"""Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting, in one of two processes
+on 2 cores (``--jobs 2``): the Table 1 online runs in docs/records took 0.015-0.027 s per transition on the particle,
+0.013-0.030 on the maze, about 0.037 on Reacher (2026-11-22 and 2026-12-01). The Sawyer's is a guess (a larger
+MuJoCo model and state); ``ebm-eval --experiment list`` prints measured times beside the estimates once runs exist."""
+
+ACTING_SHARE = 3.0
+"""A planning agent's evaluation step costs about a third of a learning step (no energy training, warm-started
+plans): the maze online runs, whose 60,000 evaluation steps would otherwise double their estimate, took 11-25 min."""
+
+PPO_SECONDS_PER_STEP = 0.001
+"""Rough CPU seconds per PPO transition (docs/benchmarks.md: about 2,000 transitions/s on the particle)."""
+
+SECONDS_PER_OFFLINE_UPDATE = {"ebm": 0.02, "action-ff": 0.003}
+"""Rough CPU seconds per ``learn_offline`` minibatch of 256."""
+
+FIGURE_SECONDS_PER_SEED = {
+    "obstacle_generalisation": 900.0,
+    "plan_diversity": 400.0,
+    "reacher_directions": 600.0,
+    "maze_exploration": 950.0,
+    "sawyer_exploration": 1800.0,
+    "energy_maps": 900.0,
+}
+"""Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents); plan_diversity
+and maze_exploration from their recorded wall times (2026-12-01), the others guesses."""
+
+
+def _episode_length(job: Job) -> int:
+    import gymnasium as gym
+
+    steps = job.env_kwargs.get("max_episode_steps")
+    if steps is None:
+        spec = gym.spec(job.env_id)
+        steps = spec.max_episode_steps if spec is not None else 1000
+    return int(steps or 1000)
+
+
+def estimate_job_seconds(job: Job) -> float:
+    """A rough CPU-seconds estimate of one job (learning, its directed dataset if any, evaluations).
+
+    :param job: the job.
+    :return: seconds.
+    """
+    per_step = PPO_SECONDS_PER_STEP if job.agent == "ppo" else SECONDS_PER_STEP.get(job.env_short, 0.01)
+    act = 0.0001 if job.agent == "ppo" else per_step / ACTING_SHARE
+    episode = _episode_length(job)
+    extra = 1 + len(job.extra_evaluations)
+    if job.mode == "online":
+        evaluations = max(job.timesteps // max(job.eval_freq, 1), 1)
+        return job.timesteps * per_step + (evaluations + extra - 1) * job.eval_episodes * episode * act
+    sequential = job.dataset == "directed+sequential"
+    epochs = job.offline_kwargs.get("epochs", 1 if sequential else 10)
+    repeat = job.offline_kwargs.get("repeat", 100) if sequential else 1
+    batch = job.offline_kwargs.get("batch_size", 256)
+    updates = epochs * math.ceil(job.timesteps * repeat / batch)
+    collect = 0.0 if job.dataset == "random" else job.timesteps * SECONDS_PER_STEP.get(job.env_short, 0.01) / 2
+    return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + collect + extra * job.eval_episodes * episode * act
+
+
+def estimate_part_seconds(part: Part) -> float:
+    """A rough CPU-seconds estimate of a part (one process; ``--jobs N`` divides the wall time).
+
+    :param part: the part.
+    :return: seconds.
+    """
+    if part.figure is not None:
+        factor = 1.0 if part.scale == "paper" else 0.01
+        return FIGURE_SECONDS_PER_SEED.get(part.figure, 600.0) * len(part.seeds) * factor
+    return sum(estimate_job_seconds(job) for job in part.jobs)
+
+
+def format_duration(seconds: float) -> str:
+    """``45 s``, ``12 min``, ``3.4 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    return f"{seconds / 3600:.1f} h"
+
+
+@dataclass(frozen=True)
+class MeasuredCost:
+    """The wall time that a part's finished runs (or its figure) took, summed over runs.
+
+    :param seconds: summed wall time of the finished runs (for a figure: of the command that made it).
+    :param finished: runs (or figures) found finished.
+    :param total: runs (or figures) of the part.
+    """
+
+    seconds: float
+    finished: int
+    total: int
+
+    def describe(self) -> str:
+        """``measured 1.3 h (6/6 runs)``; the time of one process, so ``--jobs 2`` halves the wall time of runs."""
+        unit = "figure" if self.total == 1 and self.finished <= 1 else "runs"
+        return f"measured {format_duration(self.seconds)} ({self.finished}/{self.total} {unit})"
+
+
+def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCost | None:
+    """The measured cost of a part, read from the first of ``folders`` that holds each finished run or figure.
+
+    Each folder mirrors the layout of ``part.out_dir`` (a results folder, or records saved from one).
+
+    :param part: the part.
+    :param folders: results or records folders, searched in order.
+    :return: the measured cost, or None when nothing of the part has finished.
+    """
+    out_dir = Path(part.out_dir)
+    if part.figure is not None:
+        relative = part.figure_dir.relative_to(out_dir)
+        seconds = _first_number((Path(folder) / relative / "provenance.json" for folder in folders), "wall_time_s")
+        return None if seconds is None else MeasuredCost(seconds, 1, 1)
+    jobs = part.jobs
+    total, finished = 0.0, 0
+    for job in jobs:
+        relative = job.run_dir.relative_to(out_dir)
+        seconds = _first_number((Path(folder) / relative / "metrics.json" for folder in folders), "wall_time_s")
+        if seconds is not None:
+            total += seconds
+            finished += 1
+    return MeasuredCost(total, finished, len(jobs)) if finished else None
+
+
+def _first_number(paths: Iterable[Path], key: str) -> float | None:
+    for path in paths:
+        try:
+            value = json.loads(path.read_text()).get(key)
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(value, int | float) and math.isfinite(value):
+            return float(value)
+    return None
+
+
+__all__ = [
+    "ACTING_SHARE",
+    "FIGURE_SECONDS_PER_SEED",
+    "PPO_SECONDS_PER_STEP",
+    "SECONDS_PER_OFFLINE_UPDATE",
+    "SECONDS_PER_STEP",
+    "MeasuredCost",
+    "estimate_job_seconds",
+    "estimate_part_seconds",
+    "format_duration",
+    "measured_part_cost",
+]

@@ -1,0 +1,52 @@
+"""Cost estimates and measured times of the paper's experiments (``ebm-eval --experiment list``)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from eval.estimates import MeasuredCost, estimate_part_seconds, format_duration, measured_part_cost
+from eval.experiments import build_parts, describe_experiments, make_context
+
+
+def _part(out: Path, name: str):
+    return next(p for p in build_parts(["all"], make_context("paper", str(out))) if p.name == name)
+
+
+def _finish(run_dir: Path, seconds: float) -> None:
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "metrics.json").write_text(json.dumps({"timesteps": 50_000, "wall_time_s": seconds}))
+
+
+def test_measured_cost_sums_the_finished_runs_from_the_first_folder_holding_each(tmp_path):
+    out, records = tmp_path / "runs", tmp_path / "records"
+    part = _part(out, "table1/particle/online")
+    jobs = part.jobs
+    assert measured_part_cost(part, [out, records]) is None  # nothing finished yet
+    _finish(jobs[0].run_dir, 600.0)
+    _finish(records / jobs[0].run_dir.relative_to(out), 9_999.0)  # shadowed by the results folder's own run
+    _finish(records / jobs[1].run_dir.relative_to(out), 900.0)
+    (jobs[2].run_dir).mkdir(parents=True)
+    (jobs[2].run_dir / "metrics.json").write_text("{not json")  # an unreadable file counts as not finished
+    assert measured_part_cost(part, [out, records]) == MeasuredCost(1_500.0, 2, len(jobs))
+    assert MeasuredCost(1_500.0, 2, 6).describe() == "measured 25 min (2/6 runs)"
+
+
+def test_a_figure_is_measured_by_the_wall_time_of_its_command(tmp_path):
+    part = _part(tmp_path, "plan_diversity/particle")
+    part.figure_dir.mkdir(parents=True)
+    (part.figure_dir / "provenance.json").write_text(json.dumps({"wall_time_s": 1_147.4}))
+    cost = measured_part_cost(part, [tmp_path])
+    assert cost == MeasuredCost(1_147.4, 1, 1)
+    assert cost.describe() == "measured 19 min (1/1 figure)"
+
+
+def test_the_listing_prints_measured_times_beside_the_estimates(tmp_path):
+    part = _part(tmp_path, "table1/maze/online")
+    for job in part.jobs:
+        _finish(job.run_dir, 1_000.0)
+    text = describe_experiments(make_context("paper", str(tmp_path)), [tmp_path])
+    line = next(line for line in text.splitlines() if "table1/maze/online" in line)
+    assert f"~{format_duration(estimate_part_seconds(part))}" in line
+    assert line.endswith("measured 1.7 h (6/6 runs)")
+    assert "measured" not in next(line for line in text.splitlines() if "table1/reacher/online" in line)
