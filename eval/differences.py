@@ -44,7 +44,12 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "the goal, so every goal energy rises along it and no plan of that horizon beats waiting at the wall. The "
         "rejected moves at the wall are real 'stay' transitions, which energy training makes cheap. A 30-step horizon "
         "did not help either (pretrained EBM, seed 0, `python scripts/maze_horizon.py 30`: still at the wall): under the L1 "
-        "goal a plan must run about 40 steps round the wall before it ends nearer the goal than the wall is. The paper's "
+        "goal a plan must run about 40 steps round the wall before it ends nearer the goal than the wall is. Nor did 40 "
+        "steps with the paper's final-state goal (Eq. 6): `python scripts/probe.py table1/maze/pretrained ebm horizon=40 "
+        "'cost={goal_energy: gaussian}' --seeds 0` scored -1331.34, stuck against the bottom edge. The pretrained energy "
+        "hardly knows the walls: `python scripts/maze_walls.py <model.zip>` gives a move into the first wall 0.21 and a "
+        "move out of the box 0.09 against 0.04-0.16 for free moves (a 0.2 jump: 1.97), so plans run through walls, "
+        "the env rejects the move and the agent stands still. The paper's "
         "pretrained EBM number is better than the maze's optimum under the strict wall rule (anchors above); the "
         "original's float artefact at y = 0.25 allows it (docs/environments.md). The original's horizon for the maze "
         "is not recorded (reference/original_code.md §9: 5 to 20 steps in its log).",
