@@ -14,6 +14,7 @@ import io
 import json
 import os
 import pathlib
+import shutil
 import uuid
 import zipfile
 import zlib
@@ -145,21 +146,11 @@ def replace_with_link(source: pathlib.Path, link: pathlib.Path) -> None:
     :param source: the existing file.
     :param link: the name to (re)point at it.
     """
-    temporary = link.with_name(f".{link.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
+    with atomic_path(link) as temporary:
         try:
             os.link(source, temporary)
         except OSError:
-            with open(source, "rb") as reader, open(temporary, "wb") as writer:
-                while chunk := reader.read(1 << 20):
-                    writer.write(chunk)
-                writer.flush()
-                os.fsync(writer.fileno())
-        os.replace(temporary, link)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            temporary.unlink()
-        raise
+            shutil.copyfile(source, temporary)
 
 
 __all__ = [

@@ -104,16 +104,17 @@ class MeasuredCost:
     :param seconds: summed wall time of the finished runs (for a figure: of the command that made it).
     :param finished: runs (or figures) found finished.
     :param total: runs (or figures) of the part.
+    :param unit: what was counted, ``runs`` or ``figure``.
     """
 
     seconds: float
     finished: int
     total: int
+    unit: str = "runs"
 
     def describe(self) -> str:
         """``measured 1.3 h (6/6 runs)``; the time of one process, so ``--jobs 2`` halves the wall time of runs."""
-        unit = "figure" if self.total == 1 and self.finished <= 1 else "runs"
-        return f"measured {format_duration(self.seconds)} ({self.finished}/{self.total} {unit})"
+        return f"measured {format_duration(self.seconds)} ({self.finished}/{self.total} {self.unit})"
 
 
 def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCost | None:
@@ -129,7 +130,7 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
     if part.figure is not None:
         relative = part.figure_dir.relative_to(out_dir)
         seconds = _first_number((Path(folder) / relative / "provenance.json" for folder in folders), "wall_time_s")
-        return None if seconds is None else MeasuredCost(seconds, 1, 1)
+        return None if seconds is None else MeasuredCost(seconds, 1, 1, "figure")
     jobs = part.jobs
     total, finished = 0.0, 0
     for job in jobs:

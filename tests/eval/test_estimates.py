@@ -37,7 +37,7 @@ def test_a_figure_is_measured_by_the_wall_time_of_its_command(tmp_path):
     part.figure_dir.mkdir(parents=True)
     (part.figure_dir / "provenance.json").write_text(json.dumps({"wall_time_s": 1_147.4}))
     cost = measured_part_cost(part, [tmp_path])
-    assert cost == MeasuredCost(1_147.4, 1, 1)
+    assert cost == MeasuredCost(1_147.4, 1, 1, "figure")
     assert cost.describe() == "measured 19 min (1/1 figure)"
 
 

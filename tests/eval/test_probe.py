@@ -2,23 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import pytest
 
-SCRIPT = Path(__file__).resolve().parents[2] / "scripts" / "probe.py"
-
 
 @pytest.fixture(scope="module")
-def probe():
-    spec = importlib.util.spec_from_file_location("probe_script", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    sys.modules["probe_script"] = module
-    spec.loader.exec_module(module)
-    return module
+def probe(load_script):
+    return load_script("probe")
 
 
 def test_a_probe_runs_the_cell_with_the_change_into_its_own_folder(probe, tmp_path, capsys):

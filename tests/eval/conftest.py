@@ -1,0 +1,28 @@
+"""Helpers of the eval tests."""
+
+from __future__ import annotations
+
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+
+
+def _load_script(name: str) -> ModuleType:
+    """Import ``scripts/<name>.py`` (not a package) as the module ``<name>_script``."""
+    spec = importlib.util.spec_from_file_location(f"{name}_script", SCRIPTS / f"{name}.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="session")
+def load_script():
+    """The loader of ``scripts/<name>.py`` modules: ``load_script("probe")``."""
+    return _load_script
