@@ -163,7 +163,10 @@ def find_differences(cells: Sequence[tuple[str, Cell, np.ndarray]]) -> list[Diff
 
 
 def render_differences(differences: Sequence[Difference]) -> list[str]:
-    """The markdown section: one entry per differing cell, with its explanation.
+    """The markdown section: the differing cells grouped by their explanation, each reason written once.
+
+    Cells that share a reason (the maze's four cells, say) are listed together, in the order given, with the reason
+    once below them; a cell with a reason of its own is one line.
 
     :param differences: from :func:`find_differences`.
     :return: markdown lines.
@@ -177,14 +180,27 @@ def render_differences(differences: Sequence[Difference]) -> list[str]:
     ]
     if not differences:
         return [*lines, "No finished cell differs from the paper so far.", ""]
+    groups: dict[str, list[Difference]] = {}
     for difference in differences:
-        cell = difference.cell
-        lines.append(
-            f"- **{difference.part}, {cell.label}** ({cell.setting}): ours {difference.mean:.2f} "
-            f"[95% CI {difference.low:.2f}, {difference.high:.2f}] ({difference.seeds} seeds), {difference.direction} "
-            f"than the paper's {cell.paper:g}. Why: {difference.explanation}"
-        )
+        groups.setdefault(difference.explanation, []).append(difference)
+    for explanation, members in groups.items():
+        if len(members) == 1:
+            lines.append(f"- {_describe(members[0])}. Why: {explanation}")
+            continue
+        lines.append(f"- {len(members)} cells with one reason:")
+        lines.extend(f"  - {_describe(member)}" for member in members)
+        lines.extend(["", f"  Why: {explanation}", ""])
     return [*lines, ""]
+
+
+def _describe(difference: Difference) -> str:
+    """One differing cell: its part, agent and setting, our mean and interval, and the paper's number."""
+    cell = difference.cell
+    return (
+        f"**{difference.part}, {cell.label}** ({cell.setting}): ours {difference.mean:.2f} "
+        f"[95% CI {difference.low:.2f}, {difference.high:.2f}] ({difference.seeds} seeds), {difference.direction} "
+        f"than the paper's {cell.paper:g}"
+    )
 
 
 __all__ = ["EXPLANATIONS", "Difference", "Explanation", "explain", "find_differences", "render_differences"]

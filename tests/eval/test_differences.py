@@ -38,3 +38,18 @@ def test_the_section_lists_each_difference_with_its_reason():
     assert "**table1/maze/online, EBM** (online): ours -1200.00" in text and "worse than the paper's -20" in text
     assert "Why: Our agents reach the first wall" in text
     assert "No finished cell differs" in "\n".join(render_differences([]))
+
+
+def test_cells_with_one_reason_share_it_and_the_reason_is_written_once():
+    scores = np.array([-1200.0, -1210.0, -1190.0])
+    cells = [
+        ("table1/maze/pretrained", _cell("ebm"), scores),
+        ("table1/particle/online", _cell("action-ff"), np.array([-5.0, -5.5, -4.8])),
+        ("table1/maze/online", _cell("action-ff"), scores),
+    ]
+    text = "\n".join(render_differences(find_differences(cells)))
+    assert text.count("Our agents reach the first wall") == 1
+    assert "- 2 cells with one reason:" in text
+    maze = text.index("**table1/maze/pretrained, EBM**"), text.index("**table1/maze/online, Action FF**")
+    assert maze[0] < maze[1] < text.index("Why: Our agents reach the first wall")
+    assert text.count("off by one") == 1 and "**table1/particle/online, Action FF** (online)" in text
