@@ -7,7 +7,9 @@
 - Jobs of all selected parts run through one executor (``--jobs N`` processes, or Ray); runs shared by several
   parts (Table 2's online fixed-goal runs) run once.
 - Figure parts call their ``eval.figures`` function in this process; a figure folder with a ``figure.json`` made at
-  the same scale and seeds is complete.
+  the same scale and seeds is complete. An unfinished figure of the same part, scale and seeds (its
+  ``figure_started.json``) is resumed: the seeds it finished (``<folder>/seeds/``, ``eval.figures_common.seed_result``)
+  are kept, so a figure longer than one session finishes over several.
 - Every run and figure folder gets a ``provenance.json`` (command, part, date), and ``<out>/sessions.jsonl`` one
   line per invocation (command, machine, start, wall time, what ran, was skipped or failed), which
   ``eval.results_doc`` reports.
@@ -15,6 +17,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 import time
@@ -24,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ebm_agent.checkpoint_files import atomic_path
 from eval.executors import Executor
 from eval.jobs import Job, JobResult
 from eval.parts import Part
@@ -38,6 +42,7 @@ from eval.provenance import (
     read_provenance,
     write_provenance,
 )
+from eval.records import FIGURE_STARTED, SEED_FOLDER
 
 Log = Callable[[str], None]
 
@@ -202,11 +207,18 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         log(f"skip {folder}: complete (figure {part.figure}, same scale and seeds)")
         summary.figures_skipped.append(part.name)
         return
-    if folder.exists() and any(folder.iterdir()):
-        moved = _move_aside(folder, "old")
-        log(f"moved {folder} aside to {moved.name}: it holds another or an unfinished figure")
-    folder.mkdir(parents=True, exist_ok=True)
-    log(f"figure {part.figure} (seeds {list(part.seeds)}, scale {part.scale}) into {folder}/")
+    started = {"part": part.name, "scale": part.scale, "seeds": list(part.seeds)}
+    if _figure_started(folder) == started:
+        kept = sorted(path.name for path in (folder / SEED_FOLDER).glob("*.json"))
+        log(f"resuming figure {part.figure} in {folder}/: {len(kept)} finished seed(s) kept ({', '.join(kept) or 'none'})")
+    else:
+        if folder.exists() and any(folder.iterdir()):
+            moved = _move_aside(folder, "old")
+            log(f"moved {folder} aside to {moved.name}: it holds another figure, or one of other seeds or scale")
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(folder / FIGURE_STARTED) as temporary:
+            temporary.write_text(json.dumps(started))
+        log(f"figure {part.figure} (seeds {list(part.seeds)}, scale {part.scale}) into {folder}/")
     start = time.perf_counter()
     try:
         function = figure_function(str(part.figure))
@@ -229,6 +241,15 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         machine=machine_info(),
     )
     summary.figures_ran.append(part.name)
+
+
+def _figure_started(folder: Path) -> dict[str, Any] | None:
+    """What an unfinished figure in ``folder`` was started as (part, scale, seeds), or None."""
+    try:
+        record = json.loads((folder / FIGURE_STARTED).read_text())
+    except (OSError, ValueError):
+        return None
+    return record if isinstance(record, dict) else None
 
 
 def figure_function(name: str) -> Callable[..., Any]:

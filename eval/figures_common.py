@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -25,6 +25,7 @@ from matplotlib.figure import Figure
 
 import envs  # noqa: F401  registers the ebm/ ids
 from ebm_agent import EBMPlannerAgent, collect_random_transitions
+from eval.records import SEED_FOLDER
 
 PAPER_SCORES: dict[str, dict[str, float]] = {
     "obstacle_generalisation": {"ebm": -61.94, "action_ff": -81.24},
@@ -203,6 +204,55 @@ def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     return command if scale == "paper" else f"{command} --scale {scale}"
 
 
+def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id: str = "ebm/Particle-v0") -> str:
+    """A short hash of the library defaults of the agents a figure trains (``eval.provenance``'s digests).
+
+    :param agents: agent names of ``eval.registry.AGENTS``.
+    :param env_id: the env the defaults are read for.
+    :return: 16 hex digits.
+    """
+    import hashlib
+
+    from eval.provenance import agent_defaults_digest
+
+    parts = "/".join(str(agent_defaults_digest(agent, env_id)) for agent in agents)
+    return hashlib.sha256(parts.encode()).hexdigest()[:16]
+
+
+def seed_result(
+    out_dir: Path, figure: str, seed: int, compute: Callable[[], dict[str, Any]], digest: str | None = None
+) -> dict[str, Any]:
+    """One seed's share of a figure (its agents trained and measured), computed once per figure folder.
+
+    A figure trains its own agents, up to an hour per seed on 2 cores at the paper's scale, and is finished only
+    when all its seeds are. A figure cut short (a session's end, a killed process) keeps each seed it finished as
+    ``<out_dir>/seeds/<figure>_seed<k>.json`` (written atomically); the next run of the figure in the same folder
+    reads those back and trains only the missing seeds. A seed saved with other library defaults (``digest``) or
+    that cannot be read is computed again.
+
+    :param out_dir: the figure's folder.
+    :param figure: the figure's name.
+    :param seed: the training seed.
+    :param compute: trains and measures the seed; returns a JSON-able dict (numpy arrays come back as lists).
+    :param digest: the defaults' digest the result is valid for (default: :func:`figure_defaults_digest`).
+    :return: the seed's result, as JSON types.
+    """
+    from ebm_agent.checkpoint_files import atomic_path
+
+    digest = figure_defaults_digest() if digest is None else digest
+    path = Path(out_dir) / SEED_FOLDER / f"{figure}_seed{seed}.json"
+    try:
+        record = json.loads(path.read_text())
+    except (OSError, ValueError):
+        record = None
+    if isinstance(record, dict) and record.get("seed") == seed and record.get("defaults_digest") == digest:
+        return dict(record["result"])
+    result = to_jsonable(compute())
+    with atomic_path(path) as temporary:
+        temporary.write_text(json.dumps({"figure": figure, "seed": seed, "defaults_digest": digest, "result": result}))
+    return dict(result)
+
+
 def build_ebm(env: gym.Env, seed: int, budget: FigureBudget, **kwargs: Any) -> EBMPlannerAgent:
     """An EBM agent with the budget's planner settings and no TensorBoard images.
 
@@ -336,16 +386,19 @@ __all__ = [
     "EXPERIMENT_NAMES",
     "PAPER_SCORES",
     "SCALES",
+    "SEED_FOLDER",
     "FigureBudget",
     "FigureResult",
     "budget_for",
     "build_ebm",
     "check_seeds",
+    "figure_defaults_digest",
     "markdown_table",
     "pretrained_ebm",
     "reproduce_command",
     "run_episode",
     "save_png",
+    "seed_result",
     "summary",
     "to_jsonable",
 ]

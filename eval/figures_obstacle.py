@@ -18,6 +18,7 @@ iteration on a lattice (:func:`obstacle_optimum`).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from eval.figures_common import (
     reproduce_command,
     run_episode,
     save_png,
+    seed_result,
     summary,
     to_jsonable,
 )
@@ -85,7 +87,9 @@ def obstacle_generalisation(
     successes: dict[str, list[bool]] = {m: [] for m in METHODS}
     paths: dict[str, np.ndarray] = {}
     box_energy = BoxObstacleEnergy(low=box[:2], high=box[2:], margin=BOX_MARGIN)
-    for seed in seeds:
+
+    def train_and_measure(seed: int) -> dict[str, Any]:
+        """Both agents of one seed trained on the open particle and evaluated around the box by every method."""
         ebm = build_ebm(gym.make("ebm/Particle-v0"), seed, budget)  # random starts, no obstacle
         ebm.learn(budget.online_timesteps)
         ff = ActionFFAgent(
@@ -93,20 +97,28 @@ def obstacle_generalisation(
         )
         ff.learn(budget.online_timesteps)
         blind_planner = ff.planner
+        measured: dict[str, Any] = {"scores": {}, "successes": {}, "paths": {}}
         for method in METHODS:
             agent: Any = ff if method.startswith("action_ff") else ebm
             ebm.set_plan_constraints([box_energy] if method == "ebm_box_energy" else [])
             ff.planner = BoxAwareActionPlanner(blind_planner, box) if method == "action_ff_box_model" else blind_planner
-            seed_scores = []
+            measured["scores"][method], measured["successes"][method] = [], []
             for episode in range(budget.eval_episodes):
                 score, path, success = run_episode(agent, eval_env, seed=1000 + episode)
-                seed_scores.append(score)
-                successes[method].append(success)
-                if episode == 0 and seed == seeds[0]:
-                    paths[method] = path
-            scores[method].append(seed_scores)
-        ebm.set_plan_constraints([])
-        ff.planner = blind_planner
+                measured["scores"][method].append(score)
+                measured["successes"][method].append(success)
+                if episode == 0:
+                    measured["paths"][method] = path  # [L+1, 2]
+        return measured
+
+    for seed in seeds:
+        # Each finished seed is kept in out_dir/seeds/, so a figure cut short resumes at the next seed.
+        measured = seed_result(out_dir, "obstacle_generalisation", seed, functools.partial(train_and_measure, seed))
+        for method in METHODS:
+            scores[method].append([float(v) for v in measured["scores"][method]])
+            successes[method].extend(bool(v) for v in measured["successes"][method])
+            if seed == seeds[0]:
+                paths[method] = np.asarray(measured["paths"][method], dtype=np.float64)
     anchors = compute_anchors("ebm/Particle-v0", eval_kwargs, seed=0)
     metrics = {
         "box": list(box),

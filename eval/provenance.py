@@ -63,6 +63,16 @@ def _defaults_digest(agent: str, env_id: str) -> str | None:
     return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
+def agent_defaults_digest(agent: str, env_id: str) -> str | None:
+    """A short hash of the library defaults of one agent on one env (``AgentSpec.defaults``).
+
+    :param agent: a name of ``eval.registry.AGENTS``.
+    :param env_id: the env.
+    :return: 16 hex digits, or None when the agent does not declare its defaults.
+    """
+    return _defaults_digest(agent, env_id)
+
+
 def defaults_digest(job: Job) -> str | None:
     """A short hash of the library defaults the job's agent runs with (``AgentSpec.defaults``): what the
     fingerprint cannot see, since it hashes the job and not the code's defaults. A pretrained job on a directed
@@ -249,6 +259,7 @@ __all__ = [
     "NOT_FINGERPRINTED",
     "PROVENANCE_FILE",
     "SESSIONS_FILE",
+    "agent_defaults_digest",
     "append_session",
     "completed_result",
     "defaults_digest",

@@ -7,6 +7,8 @@ folder (``docs/records`` for the published document) with the same layout:
 - per finished run (``metrics.json`` and ``evaluations.npz`` present): ``metrics.json``, ``evaluations.npz``,
   ``provenance.json`` and ``config.yaml``;
 - per finished figure (``figure.json`` present): its JSON, CSV, markdown and PNG files of at most 2 MB;
+- per unfinished figure (``figure_started.json`` but no ``figure.json``): the seeds it finished (``seeds/*.json``, at
+  most 2 MB each), so that a figure longer than a session resumes on another machine;
 - ``sessions.jsonl`` and ``anchors_cache.json``, merged with what the records already hold.
 
 ``restore_records`` copies them back into a results folder wherever it has no finished run or figure of its own,
@@ -30,6 +32,12 @@ from pathlib import Path
 
 from ebm_agent.checkpoint_files import atomic_path
 from eval.provenance import SESSIONS_FILE, read_metrics
+
+FIGURE_STARTED = "figure_started.json"
+"""Written into a figure's folder when it starts (``eval.experiment_runner``): its part, scale and seeds."""
+
+SEED_FOLDER = "seeds"
+"""Sub-folder of a figure's folder holding its finished seeds (``eval.figures_common.seed_result``)."""
 
 RECORDS_DIR = "docs/records"
 """The records of the published document (``docs/results.md``)."""
@@ -57,11 +65,13 @@ class RecordsSummary:
     :param runs: run folders copied (relative to the results folder).
     :param figures: figure folders copied.
     :param kept: folders left alone because the destination holds a finished one of its own (restore only).
+    :param seeds: finished seeds of unfinished figures copied (``<figure folder>/seeds/<file>``).
     """
 
     runs: list[str] = field(default_factory=list)
     figures: list[str] = field(default_factory=list)
     kept: list[str] = field(default_factory=list)
+    seeds: list[str] = field(default_factory=list)
 
     def describe(self, verb: str, source: Path, target: Path) -> str:
         """One line for the log.
@@ -72,6 +82,7 @@ class RecordsSummary:
         :return: the line.
         """
         line = f"{verb} {len(self.runs)} run(s) and {len(self.figures)} figure(s) from {source}/ into {target}/"
+        line += f", and {len(self.seeds)} finished seed(s) of unfinished figures" if self.seeds else ""
         return line + (f"; {len(self.kept)} kept as they were" if self.kept else "")
 
 
@@ -106,6 +117,34 @@ def finished_figures(folder: Path) -> Iterator[Path]:
         relative = record.parent.relative_to(folder)
         if _visible(relative):
             yield relative
+
+
+def unfinished_figures(folder: Path) -> Iterator[Path]:
+    """The figure folders that were started (``figure_started.json``) and not finished (no ``figure.json``).
+
+    :param folder: a results or records folder.
+    :return: each figure folder, relative to ``folder``, in sorted order.
+    """
+    for record in sorted(Path(folder).rglob(FIGURE_STARTED)):
+        relative = record.parent.relative_to(folder)
+        if _visible(relative) and not (record.parent / "figure.json").exists():
+            yield relative
+
+
+def _copy_partial_figure(source: Path, target: Path, overwrite: bool) -> list[str]:
+    """Copy an unfinished figure's start record and finished seeds; with ``overwrite=False`` only missing seeds."""
+    started = target / FIGURE_STARTED
+    if started.exists() and started.read_text() != (source / FIGURE_STARTED).read_text():
+        return []  # the destination started another figure (other seeds or scale) in that folder: leave it
+    copied = []
+    for path in sorted((source / SEED_FOLDER).glob("*.json")):
+        destination = target / SEED_FOLDER / path.name
+        if path.stat().st_size <= MAX_FIGURE_FILE_BYTES and (overwrite or not destination.exists()):
+            _copy_atomic(path, destination)
+            copied.append(f"{SEED_FOLDER}/{path.name}")
+    if copied or not started.exists():
+        _copy_atomic(source / FIGURE_STARTED, started)
+    return copied
 
 
 def _copy_atomic(source: Path, target: Path) -> None:
@@ -217,6 +256,11 @@ def save_records(out_dir: Path, records_dir: Path = Path(RECORDS_DIR)) -> Record
     for relative in finished_figures(out_dir):
         _copy_figure(out_dir / relative, records_dir / relative)
         summary.figures.append(relative.as_posix())
+    for relative in unfinished_figures(out_dir):
+        if (records_dir / relative / "figure.json").exists():
+            continue  # the records hold the finished figure already
+        copied = _copy_partial_figure(out_dir / relative, records_dir / relative, overwrite=True)
+        summary.seeds.extend(f"{relative.as_posix()}/{name}" for name in copied)
     _merge_sessions(out_dir, records_dir)
     _merge_anchors(out_dir, records_dir)
     return summary
@@ -249,6 +293,11 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
             continue
         _copy_figure(records_dir / relative, target)
         summary.figures.append(relative.as_posix())
+    for relative in unfinished_figures(records_dir):
+        if (out_dir / relative / "figure.json").exists():
+            continue
+        copied = _copy_partial_figure(records_dir / relative, out_dir / relative, overwrite=False)
+        summary.seeds.extend(f"{relative.as_posix()}/{name}" for name in copied)
     _merge_sessions(records_dir, out_dir)
     _merge_anchors(records_dir, out_dir)
     return summary
@@ -278,11 +327,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 __all__ = [
+    "FIGURE_STARTED",
     "FIGURE_SUFFIXES",
     "MAX_FIGURE_FILE_BYTES",
     "PUBLISHED",
     "RECORDS_DIR",
     "RUN_FILES",
+    "SEED_FOLDER",
     "RecordsSummary",
     "default_docs",
     "default_records",
@@ -291,6 +342,7 @@ __all__ = [
     "main",
     "restore_records",
     "save_records",
+    "unfinished_figures",
 ]
 
 

@@ -367,3 +367,26 @@ def test_runs_made_with_other_library_defaults_are_retired(tmp_path, monkeypatch
     assert stale == [job for job in jobs if job.agent == "ebm" and job != legacy]
     assert executor.ran == stale
     assert any("other library defaults" in message for message in messages), messages
+
+
+def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seeds_moved_aside(tmp_path, monkeypatch):
+    seen = []
+
+    def figure_that_dies(out_dir, *, seeds, scale):
+        seen.append(sorted(p.name for p in Path(out_dir).iterdir()))
+        (Path(out_dir) / "seeds").mkdir(exist_ok=True)
+        (Path(out_dir) / "seeds" / "plan_diversity_seed0.json").write_text("{}")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_dies)
+    parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
+    for _ in range(2):
+        with pytest.raises(KeyboardInterrupt):
+            run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert seen == [["figure_started.json"], ["figure_started.json", "seeds"]]  # the second run found the first's seeds
+    other = [replace(parts[0], seeds=(5,))]
+    with pytest.raises(KeyboardInterrupt):
+        run_parts(other, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert seen[-1] == ["figure_started.json"]  # other seeds: a fresh folder, the old one moved aside
+    folder = parts[0].figure_dir
+    assert (folder.with_name(f"{folder.name}.replaced-old") / "seeds" / "plan_diversity_seed0.json").exists()

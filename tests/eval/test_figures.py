@@ -203,3 +203,48 @@ def test_figure_result_stores_png_paths_relative_to_its_folder_and_plain_json_nu
     assert json.loads(path.read_text())["pngs"] == ["a.png"]
     loaded = FigureResult.load(path)
     assert loaded.pngs == [tmp_path / "a.png"] and loaded.metrics == {"v": 1.5, "n": 2, "bad": None}
+
+
+def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_path):
+    from eval.figures_common import SEED_FOLDER, seed_result
+
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return {"scores": np.array([-1.5, -2.25]), "ok": np.bool_(True)}
+
+    first = seed_result(tmp_path, "demo", 3, compute, digest="d1")
+    again = seed_result(tmp_path, "demo", 3, compute, digest="d1")
+    assert first == again == {"scores": [-1.5, -2.25], "ok": True} and len(calls) == 1
+    assert (tmp_path / SEED_FOLDER / "demo_seed3.json").exists()
+    seed_result(tmp_path, "demo", 3, compute, digest="other defaults")  # made with other defaults: computed again
+    (tmp_path / SEED_FOLDER / "demo_seed4.json").write_text("{not json")  # a torn file: computed again
+    seed_result(tmp_path, "demo", 4, compute, digest="d1")
+    assert len(calls) == 3
+
+
+def test_an_obstacle_figure_cut_short_resumes_with_the_seeds_it_finished(tmp_path, monkeypatch):
+    import eval.figures_obstacle as obstacle
+
+    full = obstacle.obstacle_generalisation(tmp_path / "full", seeds=[0, 1], scale="smoke")
+    real_build, built = obstacle.build_ebm, []
+
+    def build_then_die_on_seed_1(env, seed, budget, **kwargs):
+        built.append(seed)
+        if seed == 1:
+            raise KeyboardInterrupt  # the session ends while seed 1 trains
+        return real_build(env, seed, budget, **kwargs)
+
+    monkeypatch.setattr(obstacle, "build_ebm", build_then_die_on_seed_1)
+    with pytest.raises(KeyboardInterrupt):
+        obstacle.obstacle_generalisation(tmp_path / "cut", seeds=[0, 1], scale="smoke")
+
+    def build(env, seed, budget, **kwargs):
+        built.append(seed)
+        return real_build(env, seed, budget, **kwargs)
+
+    monkeypatch.setattr(obstacle, "build_ebm", build)
+    resumed = obstacle.obstacle_generalisation(tmp_path / "cut", seeds=[0, 1], scale="smoke")
+    assert built == [0, 1, 1]  # seed 0 was not trained again
+    assert resumed.metrics["methods"] == full.metrics["methods"]  # the same numbers as a figure run in one go

@@ -150,3 +150,24 @@ def test_the_anchors_the_report_computed_are_recorded(tmp_path):
     argv = ["--report-only", "-f", str(out), "--docs", str(tmp_path / "r.md"), "--records", str(records), "--no-progress"]
     assert ebm_eval(argv) == 0
     assert json.loads((records / "anchors_cache.json").read_text())  # the particle's anchors, computed once
+
+
+def test_the_finished_seeds_of_an_unfinished_figure_are_recorded_and_restored_on_a_new_machine(tmp_path):
+    from eval.records import FIGURE_STARTED, SEED_FOLDER, restore_records, save_records
+
+    figure = Path("figures/obstacle_generalisation")
+    started = json.dumps({"part": "obstacle/particle", "scale": "paper", "seeds": [0, 1, 2]})
+    out, records, fresh = tmp_path / "out", tmp_path / "records", tmp_path / "fresh"
+    (out / figure / SEED_FOLDER).mkdir(parents=True)
+    (out / figure / FIGURE_STARTED).write_text(started)
+    (out / figure / SEED_FOLDER / "obstacle_generalisation_seed0.json").write_text('{"seed": 0}')
+    summary = save_records(out, records)
+    assert summary.seeds == [f"{figure.as_posix()}/seeds/obstacle_generalisation_seed0.json"]
+    assert "1 finished seed(s) of unfinished figures" in summary.describe("recorded", out, records)
+    restored = restore_records(records, fresh)
+    assert restored.seeds == summary.seeds and (fresh / figure / FIGURE_STARTED).read_text() == started
+    # a folder that started another figure there (other seeds) is left alone
+    other = tmp_path / "other"
+    (other / figure).mkdir(parents=True)
+    (other / figure / FIGURE_STARTED).write_text(json.dumps({"part": "obstacle/particle", "scale": "paper", "seeds": [5]}))
+    assert restore_records(records, other).seeds == [] and not (other / figure / SEED_FOLDER).exists()
