@@ -16,7 +16,9 @@ what they visit is recorded during training by :class:`~eval.figures_callbacks.V
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -39,9 +41,11 @@ from eval.figures_common import (
     budget_for,
     build_ebm,
     check_seeds,
+    figure_defaults_digest,
     markdown_table,
     reproduce_command,
     save_png,
+    seed_result,
     summary,
     to_jsonable,
 )
@@ -125,17 +129,25 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
     seeds, budget = check_seeds(seeds), budget_for(scale)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    runs: dict[str, list[VisitedStatesCallback]] = {"ebm": [], "random_uniform": [], "random_joint_targets": []}
-    for seed in seeds:
+    runs: dict[str, list[Curve]] = {"ebm": [], "random_uniform": [], "random_joint_targets": []}
+
+    def explore(seed: int) -> dict[str, Any]:
+        """The occupancy curves of the EBM and both random explorers of one seed."""
         ebm = build_ebm(gym.make("ebm/SawyerReach-v0", goal=None), seed, budget, cost=NO_GOAL)
-        runs["ebm"].append(_sawyer_run(ebm, budget.sawyer_ebm_timesteps, budget.curve_points))
+        curves = {"ebm": _sawyer_run(ebm, budget.sawyer_ebm_timesteps, budget.curve_points)}
         for name, sampler in (("random_uniform", False), ("random_joint_targets", True)):
             env = gym.make("ebm/SawyerReach-v0", goal=None)
             agent = RandomAgent("MultiInputPolicy", env, seed=seed, use_env_sampler=sampler, record_visited=False)
             # The EBM's budget is a checkpoint too: the occupancies at equal transitions are compared exactly.
-            runs[name].append(
-                _sawyer_run(agent, budget.sawyer_random_timesteps, budget.curve_points, budget.sawyer_ebm_timesteps)
-            )
+            curves[name] = _sawyer_run(agent, budget.sawyer_random_timesteps, budget.curve_points, budget.sawyer_ebm_timesteps)
+        return {name: {"timesteps": c.curve_timesteps, "values": c.curve_values} for name, c in curves.items()}
+
+    digest = figure_defaults_digest(("ebm",), "ebm/SawyerReach-v0")
+    for seed in seeds:
+        # Each finished seed is kept in out_dir/seeds/ (about an hour each), so a figure cut short resumes.
+        measured = seed_result(out_dir, "sawyer_exploration", seed, functools.partial(explore, seed), digest=digest)
+        for name in runs:
+            runs[name].append(Curve(list(measured[name]["timesteps"]), list(measured[name]["values"])))
     max_random = max(c.curve_values[-1] for name in ("random_uniform", "random_joint_targets") for c in runs[name])
     normaliser = max_random + 5.0
     agents: dict[str, Any] = {}
@@ -219,7 +231,19 @@ def _sawyer_run(agent: Any, timesteps: int, points: int, *extra: int) -> Visited
     return _record(agent, timesteps, checkpoints, original_voxel_occupancy)
 
 
-def _curves(callbacks: list[VisitedStatesCallback]) -> tuple[list[int], np.ndarray]:
+@dataclass(frozen=True)
+class Curve:
+    """An explorer's measure at its checkpoints, as a :class:`VisitedStatesCallback` records it.
+
+    :param curve_timesteps: transitions at each checkpoint [C].
+    :param curve_values: the measure (occupied voxels or cells) at each [C].
+    """
+
+    curve_timesteps: list[int]
+    curve_values: list[float]
+
+
+def _curves(callbacks: Sequence[VisitedStatesCallback | Curve]) -> tuple[list[int], np.ndarray]:
     """The seeds' curves on the first seed's checkpoints: (timesteps [C], values [seeds, C])."""
     grid = callbacks[0].curve_timesteps
     values = np.stack([np.interp(grid, c.curve_timesteps, c.curve_values) for c in callbacks])

@@ -248,3 +248,16 @@ def test_an_obstacle_figure_cut_short_resumes_with_the_seeds_it_finished(tmp_pat
     resumed = obstacle.obstacle_generalisation(tmp_path / "cut", seeds=[0, 1], scale="smoke")
     assert built == [0, 1, 1]  # seed 0 was not trained again
     assert resumed.metrics["methods"] == full.metrics["methods"]  # the same numbers as a figure run in one go
+
+
+def test_a_rerun_of_the_sawyer_exploration_reads_its_finished_seeds_back(tmp_path, monkeypatch):
+    import eval.figures_exploration as exploration
+
+    first = exploration.sawyer_exploration(tmp_path, seeds=[0], scale="smoke")
+
+    def no_training(*args, **kwargs):
+        raise AssertionError("a finished seed was trained again")
+
+    monkeypatch.setattr(exploration, "build_ebm", no_training)
+    again = exploration.sawyer_exploration(tmp_path, seeds=[0], scale="smoke")
+    assert again.metrics == first.metrics
