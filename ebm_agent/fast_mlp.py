@@ -8,8 +8,8 @@ machine (docs/benchmarks.md). :class:`WorkspaceMLP` writes each layer into a buf
 (``torch.addmm(..., out=)``) and applies the activation in place; it runs the same kernels on the same numbers as the
 module, so the energies are identical. On CPU it uses oneDNN's fused linear + activation instead when torch has it (the
 kernel ``torch.compile`` picks for such layers): in float32 it was 2x faster than the BLAS matmul plus a separate
-activation for batches of up to ~1,000 rows on the benchmark machine (so the planner scores in chunks of that size,
-see ``ebm_agent.mppi.CPU_CHUNK_TRANSITIONS``), and 1.25x faster in bf16. Its float32 energies agree with the module's
+activation for batches of 512 to 16,384 rows on the benchmark machine (the planner scores in chunks of a few
+thousand, see ``ebm_agent.mppi.CPU_CHUNK_TRANSITIONS``), and 1.25x faster in bf16. Its float32 energies agree with the module's
 to float rounding (a few 1e-7), not bit for bit; bf16 ones with autocast's to bf16 rounding.
 """
 

@@ -42,11 +42,15 @@ NOISE_BLOCK_BYTES = 16 * 2**20
 """The noise of several iterations is drawn in one call when it fits in this many bytes (one randn + one matmul
 instead of one per iteration); larger problems draw it iteration by iteration."""
 
-CPU_CHUNK_TRANSITIONS = 1024
-"""Default ``MPPIConfig.chunk_transitions`` on CPU: an MLP energy on 1,024 transitions keeps its activations (1,024 x
-128 floats per layer, 512 KB) in cache and below the size from which each fresh buffer costs page faults; oneDNN's
-fused layers (ebm_agent/fast_mlp.py) were 2x slower per transition from 2,048 rows on, and one call on 81,920 rows 3x
-slower, on the benchmark machine."""
+CPU_CHUNK_TRANSITIONS = 4096
+"""Default ``MPPIConfig.chunk_transitions`` on CPU: candidates are scored about 4,096 transitions per cost call. Each
+chunk costs ~15 small ops besides the energy's matmuls, so small chunks pay that overhead many times, while one call
+on everything (81,920 rows) was 2-3x slower per transition (fresh multi-MB buffers page-fault). 4,096 was the fastest
+of 1,024 / 2,048 / 4,096 / 8,192 on all 7 large problems timed (D in {2, 20}, K in {256, 1024}, T in {20, 80}, 10
+iterations; 10-35% faster than 1,024): ``python -m eval.bench --quick --chunks 1024 2048 4096 8192``, docs/benchmarks.md.
+The agent's default plan (K=80, T=10: 800 transitions) is one chunk either way. It was 1,024 before 2026-12-02, when
+fused layers measured 2x slower per transition from 2,048 rows on; on 2026-12-02 they were not (the chunk table of
+docs/benchmarks.md)."""
 
 CostFn = Callable[[Tensor, Tensor | None], Tensor]
 

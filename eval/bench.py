@@ -43,10 +43,10 @@ from torch import Tensor, nn
 
 from ebm_agent.costs import GaussianGoalEnergy, PlanCost
 from ebm_agent.energy import EnergyModel
-from ebm_agent.mppi import MPPIConfig, MPPIPlanner, native_bf16
+from ebm_agent.mppi import CPU_CHUNK_TRANSITIONS, MPPIConfig, MPPIPlanner, native_bf16
 from ebm_agent.networks import build_mlp
 
-__all__ = ["PlanTiming", "bench_learn", "bench_plan", "main", "pytorch_mppi_version"]
+__all__ = ["PlanTiming", "bench_chunks", "bench_learn", "bench_plan", "main", "pytorch_mppi_version"]
 
 FULL_GRID = {"state_dims": (2, 4, 20), "samples": (64, 256, 1024), "horizons": (20, 80), "iterations": (10, 80)}
 QUICK_GRID = {"state_dims": (2, 20), "samples": (64, 1024), "horizons": (20, 80), "iterations": (10,)}
@@ -190,6 +190,49 @@ def bench_plan(
     return PlanTiming(
         str(device), state_dim, samples, horizon, iterations, medians["ours"], medians["bf16"], medians.get("theirs")
     )
+
+
+def bench_chunks(
+    state_dim: int, samples: int, horizon: int, iterations: int, chunks: Sequence[int], repeats: int, compare: bool
+) -> dict[str, float]:
+    """
+    Time one CPU problem size with several ``MPPIConfig.chunk_transitions``, interleaved (float32, one env).
+
+    :param state_dim: D.
+    :param samples: K.
+    :param horizon: T.
+    :param iterations: I.
+    :param chunks: the chunk sizes (transitions per cost call; 0: no chunking).
+    :param repeats: timed plans per variant; the median is kept.
+    :param compare: also time pytorch-mppi (key ``"theirs"``).
+    :return: median ms per plan, keyed by the chunk size as a string (and ``"theirs"``).
+    """
+    device = torch.device("cpu")
+    variants = {str(c): _ours(state_dim, samples, horizon, iterations, device, chunk_transitions=c) for c in chunks}
+    if compare:
+        variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device)
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    for fn in variants.values():
+        fn()
+    for _ in range(repeats):
+        for name, fn in variants.items():
+            times[name].append(_timed(fn, device))
+    return {name: statistics.median(values) for name, values in times.items()}
+
+
+def _chunk_table(cases: Sequence[tuple[int, int, int, int]], chunks: Sequence[int], repeats: int, compare: bool) -> list[str]:
+    names = [str(c) for c in chunks]
+    header = "| D | K | T | iters | " + " | ".join(f"chunk {c} ms" for c in names) + " | pytorch-mppi ms | best chunk |"
+    lines = [header, "|---" * (header.count("|") - 1) + "|"]
+    for case in cases:
+        medians = bench_chunks(*case, chunks=chunks, repeats=repeats, compare=compare)
+        best = min(names, key=lambda name: medians[name])
+        theirs = medians.get("theirs")
+        cells = [f"{medians[name]:.1f}" + ("" if theirs is None else f" ({theirs / medians[name]:.2f}x)") for name in names]
+        theirs_cell = "n/a" if theirs is None else f"{theirs:.1f}"
+        lines.append(f"| {' | '.join(str(v) for v in case)} | {' | '.join(cells)} | {theirs_cell} | {best} |")
+        print(lines[-1], flush=True)
+    return lines
 
 
 def bench_quality(problems: int) -> dict[str, float]:
@@ -385,6 +428,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--no-compile", action="store_true", help="skip the torch.compile section")
     parser.add_argument("--quality", type=int, default=30, help="plans of the bf16 quality check (0 skips)")
     parser.add_argument("--note", action="append", default=[], help="a line to add to the report's header")
+    parser.add_argument(
+        "--chunks",
+        type=int,
+        nargs="+",
+        default=None,
+        help="also time these MPPIConfig.chunk_transitions on the grid's CPU cases larger than one chunk (e.g. 1024 4096)",
+    )
     parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.learn_worker:
@@ -433,6 +483,17 @@ def main(argv: Sequence[str] | None = None) -> None:
         "The agent plans in float32 by default (`MPPIConfig.autocast=None`); bf16 is opt-in (`autocast='bf16'`), and",
         f"this machine's CPU {native} native bf16 dot products (AVX512-BF16 or AMX).",
     ]
+    if args.chunks:
+        positive = [c for c in args.chunks if c > 0]
+        large = [case for case in cases if not positive or case[1] * case[2] > min(positive)]
+        report += [
+            "",
+            "## Chunk size (ms per plan, float32, CPU; in brackets pytorch-mppi / ours)",
+            "",
+            f"`MPPIConfig.chunk_transitions=None` takes `CPU_CHUNK_TRANSITIONS` = {CPU_CHUNK_TRANSITIONS} on CPU.",
+            "",
+            *_chunk_table(large, args.chunks, args.repeats, compare),
+        ]
     if args.quality > 0:
         quality = bench_quality(args.quality)
         report += [
