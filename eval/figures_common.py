@@ -219,6 +219,11 @@ def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id:
     return hashlib.sha256(parts.encode()).hexdigest()[:16]
 
 
+def seed_result_path(out_dir: Path, figure: str, seed: int) -> Path:
+    """Where :func:`seed_result` keeps one seed's result: ``<out_dir>/seeds/<figure>_seed<k>.json``."""
+    return Path(out_dir) / SEED_FOLDER / f"{figure}_seed{seed}.json"
+
+
 def seed_result(
     out_dir: Path, figure: str, seed: int, compute: Callable[[], dict[str, Any]], digest: str | None = None
 ) -> dict[str, Any]:
@@ -240,7 +245,7 @@ def seed_result(
     from ebm_agent.checkpoint_files import atomic_path
 
     digest = figure_defaults_digest() if digest is None else digest
-    path = Path(out_dir) / SEED_FOLDER / f"{figure}_seed{seed}.json"
+    path = seed_result_path(out_dir, figure, seed)
     try:
         record = json.loads(path.read_text())
     except (OSError, ValueError):
@@ -399,6 +404,7 @@ __all__ = [
     "run_episode",
     "save_png",
     "seed_result",
+    "seed_result_path",
     "summary",
     "to_jsonable",
 ]

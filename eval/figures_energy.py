@@ -13,8 +13,11 @@ at neither (``unexplored_energy_change``), beside the mean energy of visited and
 
 from __future__ import annotations
 
+import functools
 import itertools
+import shutil
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -25,17 +28,22 @@ import numpy as np
 from envs.maze import maze_valid
 from eval.figures_callbacks import EnergyMapCallback, EnergySnapshot, linear_checkpoints
 from eval.figures_common import (
+    FigureBudget,
     FigureResult,
     budget_for,
     build_ebm,
     check_seeds,
+    figure_defaults_digest,
     markdown_table,
     reproduce_command,
     save_png,
+    seed_result,
+    seed_result_path,
     summary,
     to_jsonable,
 )
 from eval.figures_exploration import MAZE_BINS, NO_GOAL, free_cells
+from eval.records import SEED_FOLDER
 
 ENERGY_ENVS: dict[str, tuple[str, dict[str, float] | None]] = {
     "particle": ("ebm/Particle-v0", None),
@@ -60,14 +68,20 @@ def energy_maps(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") ->
     pngs = []
     for name, (env_id, cost) in ENERGY_ENVS.items():
         free = free_cells(MAZE_BINS) if name == "maze" else np.ones((MAZE_BINS, MAZE_BINS), dtype=bool)
+        png = out_dir / f"energy_maps_{name}.png"
+        kept_png = out_dir / SEED_FOLDER / png.name  # the first seed's maps, drawn when it finishes
         runs = []
         for seed in seeds:
-            agent = build_ebm(gym.make(env_id), seed, budget, cost=cost)
-            callback = EnergyMapCallback(checkpoints, resolution=budget.energy_resolution, bins=MAZE_BINS)
-            agent.learn(budget.online_timesteps, callback=callback)
-            runs.append(callback.snapshots)
+            # Each finished run is kept in out_dir/seeds/, so a figure cut short resumes at the next one.
+            drawing = kept_png if seed == seeds[0] else None
+            if drawing is not None and not drawing.exists():  # its result without its drawing: train it again
+                seed_result_path(out_dir, f"energy_maps_{name}", seed).unlink(missing_ok=True)
+            compute = functools.partial(_energy_run, budget, checkpoints, env_id, name, cost, seed, drawing)
+            measured = seed_result(out_dir, f"energy_maps_{name}", seed, compute, digest=figure_defaults_digest(("ebm",)))
+            runs.append([SnapshotSummary.from_json(record) for record in measured["snapshots"]])
         metrics["envs"][name] = _env_metrics(runs, free)
-        pngs.append(_plot_snapshots(runs[0], name, out_dir / f"energy_maps_{name}.png"))
+        shutil.copyfile(kept_png, png)
+        pngs.append(png)
     rows = []
     for name, record in metrics["envs"].items():
         last = record["snapshots"][-1]
@@ -90,7 +104,64 @@ def energy_maps(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") ->
     return result
 
 
-def _env_metrics(runs: list[list[EnergySnapshot]], free: np.ndarray) -> dict[str, Any]:
+def _energy_run(
+    budget: FigureBudget,
+    checkpoints: list[int],
+    env_id: str,
+    name: str,
+    cost: dict[str, float] | None,
+    seed: int,
+    drawing: Path | None,
+) -> dict[str, Any]:
+    """One online run with its snapshots, summarised; its energy maps are drawn into ``drawing`` when given."""
+    agent = build_ebm(gym.make(env_id), seed, budget, cost=cost)
+    callback = EnergyMapCallback(checkpoints, resolution=budget.energy_resolution, bins=MAZE_BINS)
+    agent.learn(budget.online_timesteps, callback=callback)
+    if drawing is not None:
+        _plot_snapshots(callback.snapshots, name, drawing)
+    return {"snapshots": [_summarise(snap) for snap in callback.snapshots]}
+
+
+@dataclass(frozen=True)
+class SnapshotSummary:
+    """What the figure's numbers need of an :class:`EnergySnapshot` (its full energy map only goes into the drawing).
+
+    :param timestep: transitions consumed.
+    :param energy_mean: mean of the [R, R] energy map.
+    :param energy_std: std of the energy map.
+    :param visit_counts: [B, B] visit counts of the coverage grid.
+    :param cell_energies: [B, B] energy of a move centred on each grid cell's centre.
+    """
+
+    timestep: int
+    energy_mean: float
+    energy_std: float
+    visit_counts: np.ndarray
+    cell_energies: np.ndarray
+
+    @classmethod
+    def from_json(cls, record: dict[str, Any]) -> SnapshotSummary:
+        """Rebuild from :func:`_summarise`'s JSON form."""
+        return cls(
+            int(record["timestep"]),
+            float(record["energy_mean"]),
+            float(record["energy_std"]),
+            np.asarray(record["visit_counts"]),
+            np.asarray(record["cell_energies"], dtype=np.float64),
+        )
+
+
+def _summarise(snap: EnergySnapshot) -> dict[str, Any]:
+    return {
+        "timestep": snap.timestep,
+        "energy_mean": float(snap.energies.mean()),
+        "energy_std": float(snap.energies.std()),
+        "visit_counts": snap.visit_counts,
+        "cell_energies": snap.cell_energies,
+    }
+
+
+def _env_metrics(runs: list[list[SnapshotSummary]], free: np.ndarray) -> dict[str, Any]:
     """Per-snapshot statistics (mean/std over seeds) and the energy-change measures of one env."""
     per_snapshot: list[dict[str, list[float]]] = [{} for _ in runs[0]]
     explored_changes, unexplored_changes = [], []
@@ -99,8 +170,8 @@ def _env_metrics(runs: list[list[EnergySnapshot]], free: np.ndarray) -> dict[str
             visited = snap.visit_counts > 0  # [B, B]
             values = {
                 "coverage": float(visited.mean()),
-                "energy_mean": float(snap.energies.mean()),
-                "energy_std": float(snap.energies.std()),
+                "energy_mean": snap.energy_mean,
+                "energy_std": snap.energy_std,
                 "visited_energy": _masked_mean(snap.cell_energies, visited),
                 "unvisited_energy": _masked_mean(snap.cell_energies, free & ~visited),
             }
@@ -131,6 +202,7 @@ def _finite_summary(values: list[float]) -> dict[str, float | None]:
 
 
 def _plot_snapshots(snapshots: list[EnergySnapshot], name: str, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
     columns = len(snapshots)
     figure, axes = plt.subplots(2, columns, figsize=(3.2 * columns, 6.2), squeeze=False, layout="constrained")
     extent = (-1.0, 1.0, -1.0, 1.0)

@@ -7,8 +7,9 @@ folder (``docs/records`` for the published document) with the same layout:
 - per finished run (``metrics.json`` and ``evaluations.npz`` present): ``metrics.json``, ``evaluations.npz``,
   ``provenance.json`` and ``config.yaml``;
 - per finished figure (``figure.json`` present): its JSON, CSV, markdown and PNG files of at most 2 MB;
-- per unfinished figure (``figure_started.json`` but no ``figure.json``): the seeds it finished (``seeds/*.json``, at
-  most 2 MB each), so that a figure longer than a session resumes on another machine;
+- per unfinished figure (``figure_started.json`` but no ``figure.json``): the seeds it finished (``seeds/*.json`` and
+  the drawings kept with them, ``seeds/*.png``, at most 2 MB each), so that a figure longer than a session resumes on
+  another machine;
 - ``sessions.jsonl`` and ``anchors_cache.json``, merged with what the records already hold.
 
 ``restore_records`` copies them back into a results folder wherever it has no finished run or figure of its own,
@@ -137,7 +138,7 @@ def _copy_partial_figure(source: Path, target: Path, overwrite: bool) -> list[st
     if started.exists() and started.read_text() != (source / FIGURE_STARTED).read_text():
         return []  # the destination started another figure (other seeds or scale) in that folder: leave it
     copied = []
-    for path in sorted((source / SEED_FOLDER).glob("*.json")):
+    for path in sorted(p for p in (source / SEED_FOLDER).glob("*") if p.suffix in (".json", ".png")):
         destination = target / SEED_FOLDER / path.name
         if path.stat().st_size <= MAX_FIGURE_FILE_BYTES and (overwrite or not destination.exists()):
             _copy_atomic(path, destination)

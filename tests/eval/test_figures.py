@@ -261,3 +261,30 @@ def test_a_rerun_of_the_sawyer_exploration_reads_its_finished_seeds_back(tmp_pat
     monkeypatch.setattr(exploration, "build_ebm", no_training)
     again = exploration.sawyer_exploration(tmp_path, seeds=[0], scale="smoke")
     assert again.metrics == first.metrics
+
+
+def test_energy_maps_cut_short_resume_with_the_runs_they_finished(tmp_path, monkeypatch):
+    import eval.figures_energy as energy
+
+    full = energy.energy_maps(tmp_path / "full", seeds=[0, 1], scale="smoke")
+    real_build, built = energy.build_ebm, []
+
+    def build(env, seed, budget, **kwargs):
+        built.append((env.spec.id, seed))
+        if len(built) == 3:
+            raise KeyboardInterrupt  # cut short while the maze's first run trains
+        return real_build(env, seed, budget, **kwargs)
+
+    monkeypatch.setattr(energy, "build_ebm", build)
+    with pytest.raises(KeyboardInterrupt):
+        energy.energy_maps(tmp_path / "cut", seeds=[0, 1], scale="smoke")
+    built.clear()
+    monkeypatch.setattr(
+        energy,
+        "build_ebm",
+        lambda env, seed, budget, **kw: built.append((env.spec.id, seed)) or real_build(env, seed, budget, **kw),
+    )
+    resumed = energy.energy_maps(tmp_path / "cut", seeds=[0, 1], scale="smoke")
+    assert built == [("ebm/Maze-v0", 0), ("ebm/Maze-v0", 1)]  # the particle's two runs were kept
+    assert resumed.metrics == full.metrics
+    assert all(png.exists() for png in resumed.pngs)
