@@ -16,11 +16,13 @@ from pathlib import Path
 from eval.jobs import Job
 from eval.parts import Part
 
-SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.08}
+SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.135}
 """Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting, in one of two processes
 on 2 cores (``--jobs 2``): the Table 1 online runs in docs/records took 0.015-0.027 s per transition on the particle,
-0.013-0.030 on the maze, about 0.037 on Reacher (2026-11-22 and 2026-12-01). The Sawyer's is a guess (a larger
-MuJoCo model and state); ``ebm-eval --experiment list`` prints measured times beside the estimates once runs exist."""
+0.013-0.030 on the maze, about 0.037 on Reacher (2026-11-22 and 2026-12-01). The Sawyer's is its measured acting cost
+times ``ACTING_SHARE``: the pretrained EBM's 10,000 evaluation steps took 437-467 s (2026-12-02, two processes on 2
+cores), 0.045 s a step; it was a guess of 0.08 before. ``ebm-eval --experiment list`` prints measured times beside the
+estimates once runs exist."""
 
 ACTING_SHARE = 3.0
 """A planning agent's evaluation step costs about a third of a learning step (no energy training, warm-started
@@ -37,7 +39,7 @@ FIGURE_SECONDS_PER_SEED = {
     "plan_diversity": 400.0,
     "reacher_directions": 600.0,
     "maze_exploration": 950.0,
-    "sawyer_exploration": 4200.0,
+    "sawyer_exploration": 7000.0,
     "energy_maps": 2100.0,
 }
 """Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents). plan_diversity,
