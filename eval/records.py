@@ -143,7 +143,7 @@ def _copy_partial_figure(source: Path, target: Path, overwrite: bool) -> list[st
         if path.stat().st_size <= MAX_FIGURE_FILE_BYTES and (overwrite or not destination.exists()):
             _copy_atomic(path, destination)
             copied.append(f"{SEED_FOLDER}/{path.name}")
-    if copied or not started.exists():
+    if copied:  # a figure with no finished seed has nothing to resume
         _copy_atomic(source / FIGURE_STARTED, started)
     return copied
 

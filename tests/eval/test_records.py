@@ -171,3 +171,12 @@ def test_the_finished_seeds_of_an_unfinished_figure_are_recorded_and_restored_on
     (other / figure).mkdir(parents=True)
     (other / figure / FIGURE_STARTED).write_text(json.dumps({"part": "obstacle/particle", "scale": "paper", "seeds": [5]}))
     assert restore_records(records, other).seeds == [] and not (other / figure / SEED_FOLDER).exists()
+
+
+def test_a_started_figure_without_a_finished_seed_is_not_recorded(tmp_path):
+    from eval.records import FIGURE_STARTED, save_records
+
+    (tmp_path / "out" / "figures" / "energy_maps").mkdir(parents=True)
+    (tmp_path / "out" / "figures" / "energy_maps" / FIGURE_STARTED).write_text("{}")
+    assert save_records(tmp_path / "out", tmp_path / "records").seeds == []
+    assert not (tmp_path / "records" / "figures" / "energy_maps").exists()
