@@ -40,13 +40,13 @@ FIGURE_SECONDS_PER_SEED = {
     "reacher_directions": 600.0,
     "maze_exploration": 950.0,
     "sawyer_exploration": 7000.0,
-    "energy_maps": 2100.0,
+    "energy_maps": 1000.0,
 }
 """Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents). plan_diversity,
 reacher_directions and maze_exploration from their recorded wall times (2026-12-01). The others from what they
 train: obstacle_generalisation an EBM and an Action FF online for 50,000 particle transitions each (the Table 1
-particle online runs took 1,000-1,400 s each), energy_maps an online EBM on the particle and one on the maze
-(1,364 s and 666 s in Table 1), sawyer_exploration an online EBM on the Sawyer (50,000 transitions at the guessed
+particle online runs took 1,000-1,400 s each), energy_maps from its recorded wall time (2026-12-02: 50 min for 3
+seeds, an online EBM on the particle and one goal-free on the maze per seed), sawyer_exploration an online EBM on the Sawyer (50,000 transitions at the guessed
 ``SECONDS_PER_STEP``) and 250,000 random steps. The earlier guess of 900 s for the first two was 2-3x low."""
 
 
