@@ -11,6 +11,9 @@ Prints markdown tables, all measured in the same run so that the ratios compare 
 3. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
 4. **learn throughput**: transitions per second and peak memory of ``EBMPlannerAgent.learn`` and SB3 ``PPO.learn``
    on ``ebm/Particle-v0``, each in its own subprocess.
+5. **Chunk size** (``--chunks 1024 4096 ...``): ms per float32 plan with each ``MPPIConfig.chunk_transitions`` on
+   the grid's problems larger than the smallest chunk, interleaved, next to pytorch-mppi (how
+   ``ebm_agent.mppi.CPU_CHUNK_TRANSITIONS`` was chosen).
 
 What is timed for pytorch-mppi (0.9): ``MPPI.command(state, shift_nominal_trajectory=False)`` is one MPPI
 iteration (sample K x T action noise, roll out T sequential calls of the learned dynamics on [K, D + D], add the
