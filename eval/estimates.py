@@ -43,11 +43,12 @@ FIGURE_SECONDS_PER_SEED = {
     "energy_maps": 1000.0,
 }
 """Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents). plan_diversity,
-reacher_directions and maze_exploration from their recorded wall times (2026-12-01). The others from what they
-train: obstacle_generalisation an EBM and an Action FF online for 50,000 particle transitions each (the Table 1
-particle online runs took 1,000-1,400 s each), energy_maps from its recorded wall time (2026-12-02: 50 min for 3
-seeds, an online EBM on the particle and one goal-free on the maze per seed), sawyer_exploration an online EBM on the Sawyer (50,000 transitions at the guessed
-``SECONDS_PER_STEP``) and 250,000 random steps. The earlier guess of 900 s for the first two was 2-3x low."""
+reacher_directions, maze_exploration and energy_maps from their recorded wall times (2026-12-01 and 2026-12-02; the
+energy maps: 48 min for 3 seeds, each an online EBM on the particle and a goal-free one on the maze). The others from
+what they train: obstacle_generalisation an EBM and an Action FF online for 50,000 particle transitions each (the
+Table 1 particle online runs took 1,000-1,400 s each), sawyer_exploration an online EBM on the Sawyer (50,000
+transitions at ``SECONDS_PER_STEP``) and 250,000 random steps. The earlier guess of 900 s for obstacle_generalisation
+was 3x low."""
 
 
 def _episode_length(job: Job) -> int:
