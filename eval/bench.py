@@ -162,6 +162,17 @@ def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device:
     return plan
 
 
+def _interleaved_medians(variants: dict[str, Callable[[], object]], device: torch.device, repeats: int) -> dict[str, float]:
+    """Median ms of each variant over ``repeats`` rounds, one call of every variant per round, after one warm-up each."""
+    times: dict[str, list[float]] = {name: [] for name in variants}
+    for fn in variants.values():
+        fn()  # warm-up: first-call allocations and kernel selection
+    for _ in range(repeats):
+        for name, fn in variants.items():
+            times[name].append(_timed(fn, device))
+    return {name: statistics.median(values) for name, values in times.items()}
+
+
 def bench_plan(
     state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, repeats: int, compare: bool
 ) -> PlanTiming:
@@ -183,13 +194,7 @@ def bench_plan(
     }
     if compare:
         variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device)
-    times: dict[str, list[float]] = {name: [] for name in variants}
-    for fn in variants.values():
-        fn()  # warm-up: first-call allocations and kernel selection
-    for _ in range(repeats):
-        for name, fn in variants.items():
-            times[name].append(_timed(fn, device))
-    medians = {name: statistics.median(values) for name, values in times.items()}
+    medians = _interleaved_medians(variants, device, repeats)
     return PlanTiming(
         str(device), state_dim, samples, horizon, iterations, medians["ours"], medians["bf16"], medians.get("theirs")
     )
@@ -214,13 +219,7 @@ def bench_chunks(
     variants = {str(c): _ours(state_dim, samples, horizon, iterations, device, chunk_transitions=c) for c in chunks}
     if compare:
         variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device)
-    times: dict[str, list[float]] = {name: [] for name in variants}
-    for fn in variants.values():
-        fn()
-    for _ in range(repeats):
-        for name, fn in variants.items():
-            times[name].append(_timed(fn, device))
-    return {name: statistics.median(values) for name, values in times.items()}
+    return _interleaved_medians(variants, device, repeats)
 
 
 def _chunk_table(cases: Sequence[tuple[int, int, int, int]], chunks: Sequence[int], repeats: int, compare: bool) -> list[str]:

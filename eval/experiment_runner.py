@@ -38,6 +38,7 @@ from eval.provenance import (
     job_fingerprint,
     machine_info,
     now,
+    read_json_dict,
     read_metrics,
     read_provenance,
     write_provenance,
@@ -208,7 +209,7 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         summary.figures_skipped.append(part.name)
         return
     started = {"part": part.name, "scale": part.scale, "seeds": list(part.seeds)}
-    if _figure_started(folder) == started:
+    if read_json_dict(folder / FIGURE_STARTED) == started:
         kept = sorted(path.name for path in (folder / SEED_FOLDER).glob("*.json"))
         log(f"resuming figure {part.figure} in {folder}/: {len(kept)} finished seed(s) kept ({', '.join(kept) or 'none'})")
     else:
@@ -241,15 +242,6 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         machine=machine_info(),
     )
     summary.figures_ran.append(part.name)
-
-
-def _figure_started(folder: Path) -> dict[str, Any] | None:
-    """What an unfinished figure in ``folder`` was started as (part, scale, seeds), or None."""
-    try:
-        record = json.loads((folder / FIGURE_STARTED).read_text())
-    except (OSError, ValueError):
-        return None
-    return record if isinstance(record, dict) else None
 
 
 def figure_function(name: str) -> Callable[..., Any]:

@@ -243,14 +243,12 @@ def seed_result(
     :return: the seed's result, as JSON types.
     """
     from ebm_agent.checkpoint_files import atomic_path
+    from eval.provenance import read_json_dict
 
     digest = figure_defaults_digest() if digest is None else digest
     path = seed_result_path(out_dir, figure, seed)
-    try:
-        record = json.loads(path.read_text())
-    except (OSError, ValueError):
-        record = None
-    if isinstance(record, dict) and record.get("seed") == seed and record.get("defaults_digest") == digest:
+    record = read_json_dict(path)
+    if record is not None and record.get("seed") == seed and record.get("defaults_digest") == digest:
         return dict(record["result"])
     result = to_jsonable(compute())
     with atomic_path(path) as temporary:

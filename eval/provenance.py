@@ -138,12 +138,9 @@ def read_metrics(run_dir: Path) -> dict[str, Any] | None:
     :param run_dir: the run folder.
     :return: the metrics.
     """
-    try:
-        metrics = json.loads((run_dir / "metrics.json").read_text())
-    except (OSError, ValueError):
-        return None
+    metrics = read_json_dict(Path(run_dir) / "metrics.json")
     required = ("timesteps", "score_mean", "score_std", "episode_scores", "episode_lengths")
-    if not isinstance(metrics, dict) or any(key not in metrics for key in required):
+    if metrics is None or any(key not in metrics for key in required):
         return None
     return metrics
 
@@ -214,8 +211,17 @@ def read_provenance(folder: Path) -> dict[str, Any] | None:
     :param folder: the folder.
     :return: the record.
     """
+    return read_json_dict(Path(folder) / PROVENANCE_FILE)
+
+
+def read_json_dict(path: Path) -> dict[str, Any] | None:
+    """A JSON file holding an object, or None when it is missing, unreadable, torn or holds something else.
+
+    :param path: the file.
+    :return: the object.
+    """
     try:
-        record = json.loads((Path(folder) / PROVENANCE_FILE).read_text())
+        record = json.loads(Path(path).read_text())
     except (OSError, ValueError):
         return None
     return record if isinstance(record, dict) else None
@@ -268,6 +274,7 @@ __all__ = [
     "job_fingerprint",
     "machine_info",
     "now",
+    "read_json_dict",
     "read_metrics",
     "read_provenance",
     "read_sessions",

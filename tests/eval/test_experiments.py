@@ -390,3 +390,13 @@ def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seed
     assert seen[-1] == ["figure_started.json"]  # other seeds: a fresh folder, the old one moved aside
     folder = parts[0].figure_dir
     assert (folder.with_name(f"{folder.name}.replaced-old") / "seeds" / "plan_diversity_seed0.json").exists()
+
+
+def test_read_json_dict_reads_an_object_and_gives_none_for_anything_else(tmp_path):
+    from eval.provenance import read_json_dict
+
+    (tmp_path / "ok.json").write_text('{"a": 1}')
+    (tmp_path / "torn.json").write_text('{"a": ')
+    (tmp_path / "list.json").write_text("[1, 2]")
+    assert read_json_dict(tmp_path / "ok.json") == {"a": 1}
+    assert [read_json_dict(tmp_path / name) for name in ("torn.json", "list.json", "missing.json")] == [None] * 3
