@@ -159,8 +159,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             "ground_truth": {},
             "mlp": {"device": self.device, "seed": self._base_seed() + 2, "masked_dims": spec.target_indices.tolist()},
             # A small ridge: the original's 0.3 swamps systems with small action gains (the particle moves 1/20 per
-            # unit action), pulling every solved action toward zero.
-            "rls": {"state_dims": spec.model_dims.tolist(), "ridge": 1e-6},
+            # unit action), pulling every solved action toward zero. Its random warm-up draws from the agent's seed.
+            "rls": {"state_dims": spec.model_dims.tolist(), "ridge": 1e-6, "seed": self._base_seed() + 2},
         }.get(kind, {})
         self.inverse_model = make_inverse_dynamics(
             kind,

@@ -23,6 +23,8 @@ from stable_baselines3.common.utils import get_device
 
 from ebm_agent.checkpoint_files import (
     FORMAT_VERSION,
+    INVERSE_META_MEMBER,
+    INVERSE_STATE_MEMBER,
     META_MEMBER,
     STATE_MEMBER,
     atomic_path,
@@ -74,11 +76,38 @@ class CheckpointMixin(_MixinBase):
         """
         self._check_finite_weights("save")
         if isinstance(path, io.IOBase):
-            super().save(path, exclude=exclude, include=include)
+            buffer = io.BytesIO()  # the extra member is appended to a seekable copy, then the whole zip written out
+            super().save(buffer, exclude=exclude, include=include)
+            self._append_inverse_model(buffer)
+            path.write(buffer.getvalue())
             return
         target = zip_path(path)
         with atomic_path(target) as temporary:
             super().save(temporary, exclude=exclude, include=include)
+            self._append_inverse_model(temporary)
+
+    def _append_inverse_model(self, file: pathlib.Path | io.BytesIO) -> None:
+        """Add a numpy inverse-dynamics model's fit (RLS) to a saved zip: SB3 only stores torch modules."""
+        arrays: dict[str, np.ndarray] = {}
+        rest = self._numpy_inverse_state(arrays)
+        if rest is None:
+            return
+        payload = io.BytesIO()
+        np.savez(payload, **arrays)  # type: ignore[arg-type]
+        with zipfile.ZipFile(file, mode="a") as archive:
+            archive.writestr(INVERSE_STATE_MEMBER, payload.getvalue())
+            archive.writestr(INVERSE_META_MEMBER, json.dumps(rest, default=_json_default))
+
+    def _numpy_inverse_state(self, arrays: dict[str, np.ndarray]) -> dict[str, Any] | None:
+        """The state of a numpy-only inverse model (RLS), its arrays moved into ``arrays``; None for other kinds."""
+        inverse = getattr(self, "inverse_model", None)
+        # A learned MLP's weights are SB3 torch params already; only a numpy model (RLS) needs storing here.
+        if inverse is None or isinstance(getattr(inverse, "module", None), torch.nn.Module):
+            return None
+        state = inverse.state_dict()
+        if state and all(isinstance(v, np.ndarray | int | float | str | bool) or v is None for v in state.values()):
+            return _split_state("inverse_model", state, arrays)
+        return None
 
     def save_checkpoint(self, path: str | pathlib.Path) -> pathlib.Path:
         """Save everything ``learn`` needs to resume: the SB3 zip plus replay buffers and generator states, atomically.
@@ -140,12 +169,7 @@ class CheckpointMixin(_MixinBase):
             if isinstance(generator, torch.Generator):
                 arrays[f"{name}.state"] = generator.get_state().numpy()
                 meta["generators"].append(name)
-        inverse = getattr(self, "inverse_model", None)
-        # A learned MLP's weights are SB3 torch params already; only a numpy model (RLS) needs storing here.
-        if inverse is not None and not isinstance(getattr(inverse, "module", None), torch.nn.Module):
-            state = inverse.state_dict()
-            if state and all(isinstance(v, np.ndarray | int | float | str | bool) or v is None for v in state.values()):
-                meta["inverse_model"] = _split_state("inverse_model", state, arrays)
+        meta["inverse_model"] = self._numpy_inverse_state(arrays)
         return arrays, meta
 
     # ------------------------------------------------------------------ reading
@@ -179,6 +203,24 @@ class CheckpointMixin(_MixinBase):
         source: str | pathlib.Path | io.BufferedIOBase = path
         if not isinstance(path, io.IOBase):
             source = check_checkpoint_file(path)
+        else:
+            source = io.BytesIO(path.read())  # read once: SB3 and the inverse-model member both need the bytes
+        model = cls._load_sb3(source, env, device, custom_objects, print_system_info, force_reset, **kwargs)
+        model._restore_inverse_model(source)
+        return model
+
+    @classmethod
+    def _load_sb3(
+        cls: type[SelfCheckpointMixin],
+        source: str | pathlib.Path | io.BufferedIOBase,
+        env: GymEnv | None,
+        device: torch.device | str,
+        custom_objects: dict[str, Any] | None,
+        print_system_info: bool,
+        force_reset: bool,
+        **kwargs: Any,
+    ) -> SelfCheckpointMixin:
+        """SB3's ``load``, its errors translated into ones that name the file and the way out."""
         try:
             return super().load(  # type: ignore[misc]
                 source,
@@ -211,6 +253,25 @@ class CheckpointMixin(_MixinBase):
             if "PytorchStreamReader" in str(error) or "zip archive" in str(error):
                 raise corrupted_checkpoint(source, error) from error
             raise
+
+    def _restore_inverse_model(self, source: str | pathlib.Path | io.BufferedIOBase) -> None:
+        """Put back the numpy inverse model's fit that :meth:`save` appended (nothing when there is none)."""
+        inverse = getattr(self, "inverse_model", None)
+        if inverse is None:
+            return
+        if isinstance(source, io.IOBase):
+            source.seek(0)
+        try:
+            with zipfile.ZipFile(source) as archive:
+                names = set(archive.namelist())
+                if INVERSE_STATE_MEMBER not in names or INVERSE_META_MEMBER not in names:
+                    return
+                rest = json.loads(archive.read(INVERSE_META_MEMBER).decode())
+                with np.load(io.BytesIO(archive.read(INVERSE_STATE_MEMBER)), allow_pickle=False) as npz:
+                    arrays = {key: npz[key] for key in npz.files}
+        except (ValueError, OSError, zipfile.BadZipFile, EOFError, zlib.error) as error:
+            raise corrupted_checkpoint(source, error) from error
+        inverse.load_state_dict(_join_state("inverse_model", rest, arrays))
 
     @classmethod
     def load_checkpoint(

@@ -27,6 +27,10 @@ STATE_MEMBER = "training_state.npz"
 """Zip member holding the numpy arrays of the training state."""
 META_MEMBER = "training_state.json"
 """Zip member holding the scalar training state (sizes, positions, bit-generator states) as JSON."""
+INVERSE_STATE_MEMBER = "inverse_model.npz"
+"""Zip member of a plain ``save`` holding the arrays of a numpy inverse-dynamics model (RLS); SB3 ignores it."""
+INVERSE_META_MEMBER = "inverse_model.json"
+"""Zip member of a plain ``save`` holding that model's scalar state as JSON."""
 FORMAT_VERSION = 1
 """Version of the two extra members; bumped when their layout changes."""
 
@@ -155,6 +159,8 @@ def replace_with_link(source: pathlib.Path, link: pathlib.Path) -> None:
 
 __all__ = [
     "FORMAT_VERSION",
+    "INVERSE_META_MEMBER",
+    "INVERSE_STATE_MEMBER",
     "META_MEMBER",
     "STATE_MEMBER",
     "atomic_path",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 from collections.abc import Callable, Sequence
 from typing import Any, Protocol, runtime_checkable
 
@@ -199,6 +200,11 @@ class RLSInverseDynamics:
     ``ridge`` is absolute (0.3 as the original), so it only acts as a mild prior when W_a is large; for a system
     whose actions move the state little per step (the particle moves 0.05 per unit action) lower it.
 
+    A fresh fit has W_a = 0, and the solve then returns the prior (zero) action for every transition: an agent
+    acting on it would never move, so its data would never identify W_a. Until ``warmup`` transitions have been
+    folded in, the model therefore answers with actions drawn uniformly within the bounds (from its own seeded
+    generator), which excites every action direction, as an off-policy learner's random warm-up does.
+
     :param state_dim: D.
     :param action_dim: A.
     :param action_low: [A] lower action bounds.
@@ -207,6 +213,9 @@ class RLSInverseDynamics:
     :param ridge: Tikhonov weight pulling the action towards the prior action.
     :param init_cov: initial covariance scale (large: weak prior on W = 0).
     :param state_dims: dims of s and s' the model uses (None: all).
+    :param warmup: transitions of uniformly random actions before the fit is used (None: 10 per feature, i.e.
+        10 x (len(state_dims) + A + 1)); 0 solves from the first call.
+    :param seed: seed of the warm-up actions' generator.
     """
 
     def __init__(
@@ -219,6 +228,8 @@ class RLSInverseDynamics:
         ridge: float = 0.3,
         init_cov: float = 1e3,
         state_dims: Sequence[int] | None = None,
+        warmup: int | None = None,
+        seed: int | None = None,
     ) -> None:
         self.state_dim = _check_dim(state_dim, "state_dim", "RLSInverseDynamics")
         self.action_dim = _check_dim(action_dim, "action_dim", "RLSInverseDynamics")
@@ -238,6 +249,10 @@ class RLSInverseDynamics:
             raise ValueError("RLSInverseDynamics: state_dims is empty; the model needs at least one state dim.")
         num_sub = self.state_dims.size
         self.num_features = num_sub + self.action_dim + 1  # F = [s_sub; a; 1]
+        if warmup is not None and (isinstance(warmup, bool) or not isinstance(warmup, int | np.integer) or warmup < 0):
+            raise ValueError(f"RLSInverseDynamics: warmup must be an int >= 0 or None, got {warmup!r}.")
+        self.warmup = 10 * self.num_features if warmup is None else int(warmup)
+        self._rng = np.random.default_rng(seed)
         self.weights = np.zeros((num_sub, self.num_features))  # [d, F] W = [W_s | W_a | b]
         self.covariance = np.eye(self.num_features) * self.init_cov  # [F, F] P
         self.num_updates = 0
@@ -249,10 +264,12 @@ class RLSInverseDynamics:
         :param states: [B, D].
         :param next_states: [B, D].
         :param prior_actions: [B, A] actions to regularise towards (e.g. the previous ones); zeros when None.
-        :return: [B, A] actions clipped to the bounds.
+        :return: [B, A] actions clipped to the bounds (uniformly random ones during the warm-up).
         """
         states, next_states = _check_pairs(states, next_states, self.state_dim, "RLSInverseDynamics")
         batch = states.shape[0]
+        if self.num_updates < self.warmup:  # W_a not identified yet: excite it (see the class docstring)
+            return self._rng.uniform(self.action_low, self.action_high, size=(batch, self.action_dim)).astype(np.float32)
         num_sub = self.state_dims.size
         w_state = self.weights[:, :num_sub]  # [d, d]
         w_action = self.weights[:, num_sub : num_sub + self.action_dim]  # [d, A]
@@ -302,12 +319,13 @@ class RLSInverseDynamics:
         self.covariance = 0.5 * (covariance + covariance.T)  # keep P symmetric against round-off
 
     def state_dict(self) -> dict[str, Any]:
-        """:return: the fit (W, P) and the number of transitions seen."""
+        """:return: the fit (W, P), the number of transitions seen and the warm-up generator's state (JSON text)."""
         return {
             "weights": self.weights.copy(),
             "covariance": self.covariance.copy(),
             "num_updates": self.num_updates,
             "state_dims": self.state_dims.copy(),
+            "rng_state": json.dumps(self._rng.bit_generator.state),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -325,6 +343,8 @@ class RLSInverseDynamics:
         self.weights = weights.copy()
         self.covariance = np.asarray(state["covariance"], dtype=np.float64).copy()
         self.num_updates = int(state["num_updates"])
+        if state.get("rng_state") is not None:  # absent in states saved before the warm-up existed
+            self._rng.bit_generator.state = json.loads(state["rng_state"])
 
 
 def make_inverse_dynamics(

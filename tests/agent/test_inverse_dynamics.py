@@ -135,8 +135,41 @@ def test_rls_default_ridge_is_accurate_on_a_strongly_actuated_system() -> None:
     assert np.max(np.abs(model(states, _step(system, states, actions)) - actions)) < 1e-3
 
 
+def test_rls_warms_up_with_seeded_random_actions_then_solves() -> None:
+    # A fresh fit has W_a = 0 and would answer 0 for everything, so an agent acting on it would never move.
+    model = RLSInverseDynamics(4, 2, LOW * 0.5, HIGH * 0.5, state_dims=(0, 1, 2), seed=7)
+    assert model.warmup == 10 * (3 + 2 + 1)
+    states, next_states = np.zeros((40, 4)), np.ones((40, 4))
+    explored = model(states, next_states)
+    assert explored.shape == (40, 2) and np.all(np.abs(explored) <= 0.5)
+    assert explored.std(axis=0).min() > 0.1  # every action direction is excited
+    twin = RLSInverseDynamics(4, 2, LOW * 0.5, HIGH * 0.5, state_dims=(0, 1, 2), seed=7)
+    np.testing.assert_array_equal(twin(states, next_states), explored)
+    # The warm-up ends once `warmup` transitions are folded in: the solve takes over.
+    rng = np.random.default_rng(4)
+    system = _linear_system(4)
+    for _ in range(4):
+        states = rng.uniform(-1, 1, (16, 4))
+        actions = rng.uniform(-0.5, 0.5, (16, 2))
+        model.update(states, _step(system, states, actions), actions)
+    assert model.num_updates >= model.warmup
+    actions = rng.uniform(-0.4, 0.4, (20, 2))
+    states = rng.uniform(-1, 1, (20, 4))
+    np.testing.assert_allclose(model(states, _step(system, states, actions)), actions, atol=0.05)
+    with pytest.raises(ValueError, match="warmup"):
+        RLSInverseDynamics(4, 2, LOW, HIGH, warmup=-1)
+
+
+def test_rls_warmup_generator_survives_the_state_dict() -> None:
+    model = RLSInverseDynamics(2, 2, LOW, HIGH, seed=3)
+    model(np.zeros((5, 2)), np.ones((5, 2)))  # advance the generator
+    twin = RLSInverseDynamics(2, 2, LOW, HIGH, seed=99)
+    twin.load_state_dict(model.state_dict())
+    np.testing.assert_array_equal(twin(np.zeros((5, 2)), np.ones((5, 2))), model(np.zeros((5, 2)), np.ones((5, 2))))
+
+
 def test_rls_ridge_pulls_towards_the_prior_action() -> None:
-    model = RLSInverseDynamics(2, 2, LOW, HIGH, ridge=0.3)  # untrained: W = 0, so the prior decides
+    model = RLSInverseDynamics(2, 2, LOW, HIGH, ridge=0.3, warmup=0)  # untrained: W = 0, so the prior decides
     prior = np.array([[0.5, -0.25]])
     np.testing.assert_allclose(model(np.zeros((1, 2)), np.ones((1, 2)), prior_actions=prior), prior, atol=1e-6)
     np.testing.assert_allclose(model(np.zeros((1, 2)), np.ones((1, 2))), np.zeros((1, 2)), atol=1e-6)

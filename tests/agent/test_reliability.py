@@ -164,6 +164,25 @@ def test_checkpoint_restores_numpy_inverse_dynamics(tmp_path):
     assert loaded.inverse_model.num_updates == agent.inverse_model.num_updates
 
 
+def test_rls_agent_identifies_the_particle_and_plain_save_keeps_the_fit(tmp_path):
+    # Regression: the RLS fit started at W_a = 0, answered 0 to every plan, and the agent never moved (-100 on the
+    # particle for every seed). The warm-up's random actions identify W_a (the particle moves 0.05 per unit action).
+    agent = make_agent(EBMPlannerAgent, inverse_dynamics="rls")
+    agent.learn(120)
+    inverse = agent.inverse_model
+    np.testing.assert_allclose(inverse.weights[:, 2:4], 0.05 * np.eye(2), atol=0.01)
+    # A plain save keeps the fit too (SB3 stores only torch modules): a loaded RLS agent must not stand still.
+    agent.save(tmp_path / "rls_plain.zip")
+    loaded = EBMPlannerAgent.load(tmp_path / "rls_plain.zip", env=gym.make("ebm/Particle-v0"))
+    np.testing.assert_array_equal(loaded.inverse_model.weights, inverse.weights)
+    assert loaded.inverse_model.num_updates == inverse.num_updates
+    stream = io.BytesIO()
+    agent.save(stream)
+    stream.seek(0)
+    from_stream = EBMPlannerAgent.load(stream)
+    np.testing.assert_array_equal(from_stream.inverse_model.weights, inverse.weights)
+
+
 def test_checkpoint_is_a_plain_sb3_zip_and_plain_saves_are_not_resumable(tmp_path):
     agent = make_agent(EBMPlannerAgent)
     agent.learn(30)
