@@ -4,10 +4,30 @@ from __future__ import annotations
 
 import types
 import typing
-from dataclasses import dataclass, fields
+from dataclasses import MISSING, dataclass, fields
+from dataclasses import field as dataclass_field
 from typing import Any, TypeVar
 
 T = TypeVar("T")
+
+NEUTRAL_KEY = "neutral_value"
+"""Field metadata key of :func:`neutral_field`: the value at which the field changes nothing."""
+
+
+def neutral_field(neutral: Any, default: Any = MISSING) -> Any:
+    """A config field added after runs were recorded, declaring the value that keeps the behaviour from before it.
+
+    Recorded runs carry a digest of every default (``eval.provenance.defaults_digest``), so a plain new field would
+    retire all of them although its default changes nothing. A field declared with ``neutral_field(neutral)`` is
+    left out of that digest while its default equals ``neutral``; when its default is later changed to anything
+    else it enters the digest by itself, and the runs made before are retired as they should be. Use it only for a
+    *new* field: marking an existing field removes it from the digest and retires every recorded run.
+
+    :param neutral: the value that reproduces the behaviour from before the field existed.
+    :param default: the field's default (the neutral value when omitted).
+    :return: a dataclass field (immutable defaults only: numbers, strings, None, tuples).
+    """
+    return dataclass_field(default=neutral if default is MISSING else default, metadata={NEUTRAL_KEY: neutral})
 
 
 @dataclass

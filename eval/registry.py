@@ -83,23 +83,42 @@ def class_defaults(agent_class: type) -> dict[str, Any]:
     """The default settings of an agent class: its constructor's defaults and, for every config dataclass its
     annotations name (``MPPIConfig | dict | None``), that dataclass's default fields.
 
+    Left out: the arguments in ``NOT_MEASURED``; config fields declared with ``ebm_agent.config.neutral_field``
+    while at their neutral value; and constructor arguments listed in the class's ``neutral_arguments``
+    (``{name: value}``) while their default is that value. Those were added after runs were recorded and change
+    nothing at that value, so adding them does not retire the runs.
+
     :param agent_class: the class.
     :return: ``{argument: default, "argument:ConfigName": {field: default}}``.
     """
     module = vars(sys.modules[agent_class.__module__])
+    neutral_arguments = getattr(agent_class, "neutral_arguments", {})
     defaults: dict[str, Any] = {}
     for name, parameter in inspect.signature(agent_class).parameters.items():
         if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
             continue
+        if name in neutral_arguments and parameter.default == neutral_arguments[name]:
+            continue  # an argument added later, at the value that changes nothing
         defaults[name] = _plain_default(parameter.default)
         for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
             config = module.get(token)
             if isinstance(config, type) and dataclasses.is_dataclass(config):
                 try:
-                    defaults[f"{name}:{config.__name__}"] = dataclasses.asdict(config())
+                    defaults[f"{name}:{config.__name__}"] = _config_defaults(config)
                 except TypeError:  # a config without defaults for every field
                     continue
     return defaults
+
+
+def _config_defaults(config: type) -> dict[str, Any]:
+    """A config dataclass's default fields, less those at their declared neutral value (``neutral_field``)."""
+    from ebm_agent.config import NEUTRAL_KEY
+
+    values = dataclasses.asdict(config())
+    for item in dataclasses.fields(config):
+        if NEUTRAL_KEY in item.metadata and values[item.name] == item.metadata[NEUTRAL_KEY]:
+            del values[item.name]
+    return values
 
 
 def _class_defaults_of(module: str, class_name: str) -> Callable[[str], dict[str, Any]]:

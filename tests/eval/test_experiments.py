@@ -5,10 +5,12 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 import pytest
 
+from ebm_agent.config import neutral_field
 from eval.cli import main
 from eval.experiment_runner import figure_complete, run_parts, unique_jobs
 from eval.experiments import EXPERIMENTS, build_parts, make_context, select_parts
@@ -334,6 +336,59 @@ def test_class_defaults_hold_the_config_fields_and_not_what_does_not_measure():
     ebm = class_defaults(__import__("ebm_agent.agent", fromlist=["EBMPlannerAgent"]).EBMPlannerAgent)
     assert ebm["energy:EnergyConfig"]["hidden_dim"] == 128 and ebm["planner_config:MPPIConfig"]["iterations"] == 80
     assert "seed" not in ebm and "device" not in ebm
+
+
+@dataclass
+class _ToyConfigLater:
+    width: int = 128
+    damping: float = neutral_field(0.0)  # added later; 0.0 keeps the old behaviour
+
+
+@dataclass
+class _ToyConfigChanged:
+    width: int = 128
+    damping: float = neutral_field(0.0, default=0.5)  # its default changed: now it matters
+
+
+class _ToyAgentLater(_ToyAgent):
+    neutral_arguments: ClassVar[dict[str, Any]] = {"clip": None}
+
+    def __init__(
+        self,
+        policy: str,
+        env: object,
+        config: _ToyConfigLater | dict | None = None,
+        rate: float = 1e-3,
+        clip: float | None = None,
+        seed: int | None = None,
+        verbose: int = 0,
+    ) -> None:
+        pass
+
+
+class _ToyAgentChanged(_ToyAgent):
+    neutral_arguments: ClassVar[dict[str, Any]] = {"clip": None}
+
+    def __init__(
+        self,
+        policy: str,
+        env: object,
+        config: _ToyConfigChanged | dict | None = None,
+        rate: float = 1e-3,
+        clip: float | None = 2.0,
+        seed: int | None = None,
+        verbose: int = 0,
+    ) -> None:
+        pass
+
+
+def test_fields_added_at_their_neutral_value_leave_the_defaults_digest_alone():
+    before = class_defaults(_ToyAgent)
+    renamed = {key.replace("_ToyConfigLater", "_ToyConfig"): value for key, value in class_defaults(_ToyAgentLater).items()}
+    assert renamed == before  # a new field and a new argument at their neutral values retire nothing
+    changed = class_defaults(_ToyAgentChanged)
+    assert changed["config:_ToyConfigChanged"] == {"width": 128, "damping": 0.5} and changed["clip"] == 2.0
+    assert _ToyConfigLater().damping == 0.0 and _ToyConfigChanged().damping == 0.5
 
 
 def test_runs_made_with_other_library_defaults_are_retired(tmp_path, monkeypatch):
