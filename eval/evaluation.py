@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.vec_env import VecEnv
 
@@ -91,6 +93,50 @@ def last_evaluation(callback: EvalCallback, timesteps: int, n_eval_episodes: int
     if len(callback.evaluations_successes) == len(callback.evaluations_results):
         successes = [bool(flag) for flag in callback.evaluations_successes[-1]]
     return EpisodeScores([float(s) for s in scores], [int(n) for n in lengths], successes)
+
+
+class EvaluationLine(BaseCallback):
+    """``EvalCallback``'s ``callback_after_eval``: one line per learning-curve evaluation, naming the run.
+
+    A long run without a progress bar (``ebm-eval --no-progress`` into a log file; a Sawyer run takes hours) would
+    otherwise stay silent until it ends. The line gives the run, the transitions so far out of the budget, the
+    evaluation's mean score and success rate, the time since ``learn`` started and a linear estimate of the time
+    left (evaluations included). Parallel runs' lines interleave but each names its run.
+
+    :param label: the run's name in the line (e.g. its folder).
+    :param budget: the run's transition budget.
+    :param stream: where to write (default: ``sys.stderr`` at the time of writing).
+    """
+
+    def __init__(self, label: str, budget: int, stream: IO[str] | None = None) -> None:
+        super().__init__()
+        self.label = label
+        self.budget = int(budget)
+        self.stream = stream
+        self.lines: list[str] = []
+        self._start = time.perf_counter()
+
+    def _init_callback(self) -> None:
+        self._start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        parent = self.parent
+        if not isinstance(parent, EvalCallback) or not parent.evaluations_results:
+            return True
+        scores = np.asarray(parent.evaluations_results[-1], dtype=float)  # [episodes]
+        success = ""
+        if len(parent.evaluations_successes) == len(parent.evaluations_results):
+            success = f", success {np.mean(parent.evaluations_successes[-1]):.2f}"
+        elapsed = time.perf_counter() - self._start
+        done = max(self.num_timesteps, 1)
+        left = elapsed / done * max(self.budget - self.num_timesteps, 0)
+        line = (
+            f"{self.label}: {self.num_timesteps}/{self.budget} transitions, evaluation {scores.mean():.2f} "
+            f"± {scores.std():.2f}{success}; {elapsed / 60:.1f} min so far, about {left / 60:.0f} min left"
+        )
+        self.lines.append(line)
+        print(line, file=self.stream or sys.stderr, flush=True)
+        return True
 
 
 def append_evaluation(path: Path, timesteps: int, episodes: EpisodeScores) -> None:

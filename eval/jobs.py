@@ -345,7 +345,7 @@ def _learn_online(model: Any, job: Job, eval_env: Any, callbacks: Any) -> tuple[
     """
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
 
-    from eval.evaluation import last_evaluation
+    from eval.evaluation import EvaluationLine, last_evaluation
 
     # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
     eval_callback = EvalCallback(
@@ -356,6 +356,8 @@ def _learn_online(model: Any, job: Job, eval_env: Any, callbacks: Any) -> tuple[
         deterministic=True,
         verbose=0,
         warn=False,
+        # Without a progress bar, one line per evaluation says that a long run is alive and how far it is.
+        callback_after_eval=None if job.progress_bar else EvaluationLine(str(job.run_dir), job.timesteps),
     )
     extra = callbacks(job.timesteps) if callbacks is not None else []
     model.learn(

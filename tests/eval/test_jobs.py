@@ -32,7 +32,7 @@ def _job(tmp_path, **overrides) -> Job:
     return Job(**settings)
 
 
-def test_run_job_writes_the_run_folder(tmp_path):
+def test_run_job_writes_the_run_folder(tmp_path, capsys):
     job = _job(tmp_path)
     result = run_job(job)
     assert result.ok, result.error
@@ -62,6 +62,12 @@ def test_run_job_writes_the_run_folder(tmp_path):
 
     events = list((tmp_path / "tb" / "particle").glob("random_s3_1/events.out.tfevents.*"))
     assert len(events) == 1 and events[0].stat().st_size > 0
+
+    # Without a progress bar, each learning-curve evaluation prints one line naming the run, with its score.
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith(str(run_dir))]
+    assert [line.split(": ")[1].split(",")[0] for line in lines] == ["100/200 transitions", "200/200 transitions"]
+    assert f"evaluation {np.mean(last_evaluation):.2f} ± {np.std(last_evaluation):.2f}, success 0.00" in lines[-1]
+    assert "about 0 min left" in lines[-1]
 
 
 def test_final_evaluation_is_appended_when_the_last_callback_one_was_earlier(tmp_path):
