@@ -209,9 +209,12 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         summary.figures_skipped.append(part.name)
         return
     started = {"part": part.name, "scale": part.scale, "seeds": list(part.seeds)}
+    earlier = EarlierSeeds()
     if read_json_dict(folder / FIGURE_STARTED) == started:
-        kept = sorted(path.name for path in (folder / SEED_FOLDER).glob("*.json"))
-        log(f"resuming figure {part.figure} in {folder}/: {len(kept)} finished seed(s) kept ({', '.join(kept) or 'none'})")
+        kept = sorted((folder / SEED_FOLDER).glob("*.json"))
+        earlier = EarlierSeeds.of(kept)
+        names = ", ".join(path.name for path in kept) or "none"
+        log(f"resuming figure {part.figure} in {folder}/: {len(kept)} finished seed(s) kept ({names})")
     else:
         if folder.exists() and any(folder.iterdir()):
             moved = _move_aside(folder, "old")
@@ -238,10 +241,38 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         part=part.name,
         scale=part.scale,
         seeds=list(part.seeds),
-        wall_time_s=time.perf_counter() - start,
+        # A resumed figure's time includes the seeds finished by earlier processes, where they recorded theirs.
+        wall_time_s=time.perf_counter() - start + earlier.wall_time_s,
+        earlier_seeds=earlier.count,
+        earlier_seeds_untimed=earlier.untimed,
         machine=machine_info(),
     )
     summary.figures_ran.append(part.name)
+
+
+@dataclass
+class EarlierSeeds:
+    """The seeds of a resumed figure that earlier processes finished, and the time they recorded.
+
+    :param count: how many.
+    :param wall_time_s: the sum of their recorded times.
+    :param untimed: how many were kept without a time (written before seeds recorded theirs).
+    """
+
+    count: int = 0
+    wall_time_s: float = 0.0
+    untimed: int = 0
+
+    @classmethod
+    def of(cls, paths: Sequence[Path]) -> EarlierSeeds:
+        """Read the kept seed files.
+
+        :param paths: the ``seeds/*.json`` files.
+        :return: their count and time.
+        """
+        times = [(read_json_dict(path) or {}).get("wall_time_s") for path in paths]
+        known = [float(value) for value in times if isinstance(value, int | float)]
+        return cls(count=len(paths), wall_time_s=sum(known), untimed=len(times) - len(known))
 
 
 def figure_function(name: str) -> Callable[..., Any]:

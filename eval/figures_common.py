@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -250,9 +251,12 @@ def seed_result(
     record = read_json_dict(path)
     if record is not None and record.get("seed") == seed and record.get("defaults_digest") == digest:
         return dict(record["result"])
+    start = time.perf_counter()
     result = to_jsonable(compute())
+    record = {"figure": figure, "seed": seed, "defaults_digest": digest, "result": result}
+    record["wall_time_s"] = time.perf_counter() - start  # a resumed figure adds it to its own time
     with atomic_path(path) as temporary:
-        temporary.write_text(json.dumps({"figure": figure, "seed": seed, "defaults_digest": digest, "result": result}))
+        temporary.write_text(json.dumps(record))
     return dict(result)
 
 

@@ -154,7 +154,8 @@ class PartStatus:
     :param commands: the commands that produced its runs.
     :param machines: the machines they ran on.
     :param finished: dates its runs finished.
-    :param wall_time_s: summed wall time of its runs (or the figure's).
+    :param wall_time_s: summed wall time of its runs (or the figure's, with its seeds from earlier processes).
+    :param untimed_seeds: a figure's seeds finished by earlier processes that recorded no time (not in the sum).
     """
 
     done: int = 0
@@ -163,6 +164,7 @@ class PartStatus:
     machines: list[str] = field(default_factory=list)
     finished: list[str] = field(default_factory=list)
     wall_time_s: float = 0.0
+    untimed_seeds: int = 0
 
 
 def part_status(part: Part, results: Sequence[CellResult]) -> PartStatus:
@@ -183,6 +185,7 @@ def part_status(part: Part, results: Sequence[CellResult]) -> PartStatus:
             status.machines = [describe_machine(record.get("machine"))]
             status.finished = [str(record.get("date", ""))]
             status.wall_time_s = float(record.get("wall_time_s", 0.0))
+            status.untimed_seeds = int(record.get("earlier_seeds_untimed", 0))
         return status
     runs: dict[Path, tuple[Job, dict[str, Any]]] = {}
     for result in results:
@@ -213,9 +216,10 @@ def parts_table(parts: Sequence[Part], statuses: Sequence[PartStatus]) -> str:
         commands = sorted(set(status.commands)) if status.done == status.total else [part.command()]
         dates = sorted(d[:10] for d in status.finished if d)
         when = (dates[0] if dates[0] == dates[-1] else f"{dates[0]} to {dates[-1]}") if dates else "-"
+        untimed = f" + {status.untimed_seeds} earlier seed(s), time not recorded" if status.untimed_seeds else ""
         lines.append(
             f"| {part.name} | {state} | {'<br>'.join(f'`{c}`' for c in commands)} | "
-            f"{'<br>'.join(sorted(set(status.machines)))} | {when} | {format_duration(status.wall_time_s)} |"
+            f"{'<br>'.join(sorted(set(status.machines)))} | {when} | {format_duration(status.wall_time_s)}{untimed} |"
         )
     return "\n".join(lines)
 

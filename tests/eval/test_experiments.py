@@ -447,6 +447,31 @@ def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seed
     assert (folder.with_name(f"{folder.name}.replaced-old") / "seeds" / "plan_diversity_seed0.json").exists()
 
 
+def test_a_resumed_figure_counts_the_time_of_the_seeds_earlier_processes_finished(tmp_path, monkeypatch):
+    from eval.results_doc import part_status, parts_table
+
+    def figure_that_dies(out_dir, *, seeds, scale):
+        (Path(out_dir) / "seeds").mkdir(exist_ok=True)
+        (Path(out_dir) / "seeds" / "plan_diversity_seed0.json").write_text('{"seed": 0, "wall_time_s": 600.0}')
+        (Path(out_dir) / "seeds" / "plan_diversity_seed1.json").write_text('{"seed": 1}')  # from before times were kept
+        raise KeyboardInterrupt
+
+    def figure_that_finishes(out_dir, *, seeds, scale):
+        (Path(out_dir) / "figure.json").write_text("{}")
+
+    parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_dies)
+    with pytest.raises(KeyboardInterrupt):
+        run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_finishes)
+    run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    record = read_provenance(parts[0].figure_dir)
+    assert record["earlier_seeds"] == 2 and record["earlier_seeds_untimed"] == 1
+    assert 600.0 <= record["wall_time_s"] < 660.0
+    table = parts_table(parts, [part_status(parts[0], [])])
+    assert "10 min + 1 earlier seed(s), time not recorded |" in table
+
+
 def test_read_json_dict_reads_an_object_and_gives_none_for_anything_else(tmp_path):
     from eval.provenance import read_json_dict
 
