@@ -257,8 +257,8 @@ class CheckpointMixin(_MixinBase):
     def _restore_inverse_model(self, source: str | pathlib.Path | io.BufferedIOBase) -> None:
         """Put back the numpy inverse model's fit that :meth:`save` appended (nothing when there is none)."""
         inverse = getattr(self, "inverse_model", None)
-        if inverse is None:
-            return
+        if inverse is None or isinstance(getattr(inverse, "module", None), torch.nn.Module):
+            return  # nothing to restore, or a learned MLP, whose weights are SB3's torch params
         if isinstance(source, io.IOBase):
             source.seek(0)
         try:
@@ -331,8 +331,9 @@ class CheckpointMixin(_MixinBase):
     ) -> SelfCheckpointMixin:
         """Build a fresh agent and load only the tensors of a saved model: no pickled Python object is read.
 
-        The ``*.pth`` state dicts are read with ``torch.load(weights_only=True)``; the ``data`` member (cloudpickle)
-        is never deserialised, so a shared or downloaded file cannot run code. The hyperparameters are not read
+        The ``*.pth`` state dicts are read with ``torch.load(weights_only=True)``, a numpy inverse model's fit (RLS)
+        with ``np.load(allow_pickle=False)`` and JSON; the ``data`` member (cloudpickle) is never deserialised, so a
+        shared or downloaded file cannot run code. The hyperparameters are not read
         from the file either: pass the ones the model was trained with (network sizes, inverse dynamics, ...).
         The step counter and replay buffers start from zero.
 
@@ -382,6 +383,7 @@ class CheckpointMixin(_MixinBase):
                 f"{cls.__name__}.load_weights_only: the optimiser state in {source} does not fit these settings "
                 f"({error}). Pass the settings the model was trained with."
             ) from error
+        model._restore_inverse_model(source)  # numpy arrays and JSON only, read without pickle
         return model
 
 

@@ -181,6 +181,13 @@ def test_rls_agent_identifies_the_particle_and_plain_save_keeps_the_fit(tmp_path
     stream.seek(0)
     from_stream = EBMPlannerAgent.load(stream)
     np.testing.assert_array_equal(from_stream.inverse_model.weights, inverse.weights)
+    # The weights-only loader restores the fit too (numpy arrays and JSON, no pickle): otherwise a shared RLS
+    # model would answer every plan with its warm-up's random actions.
+    safe = EBMPlannerAgent.load_weights_only(
+        tmp_path / "rls_plain.zip", gym.make("ebm/Particle-v0"), inverse_dynamics="rls", **FAST_KWARGS[EBMPlannerAgent]
+    )
+    np.testing.assert_array_equal(safe.inverse_model.weights, inverse.weights)
+    assert safe.inverse_model.num_updates == inverse.num_updates
 
 
 def test_checkpoint_is_a_plain_sb3_zip_and_plain_saves_are_not_resumable(tmp_path):
