@@ -227,7 +227,6 @@ class EBMPlannerAgent(PlannerAgentBase):
             "neg_buffer",
             "plan_cost",
             "extra_energies",
-            "_energy_gaps",
             "_negative_radius",
         ]
 

@@ -53,6 +53,70 @@ class Segment:
     actions: np.ndarray
 
 
+@dataclass
+class OnlineLoopState:
+    """Where the online loop (Algorithm 1) stands between two env steps, kept on the agent between ``learn`` calls.
+
+    It is part of the saved agent, so that a run resumed from a checkpoint (``load_checkpoint(..., force_reset=False)``
+    on the env as it was, then ``learn(..., reset_num_timesteps=False)``) goes on with the plans in flight and the
+    partly executed segments, exactly as if it had not stopped. A ``learn`` that resets the env starts a fresh one.
+
+    :param plans: [n, T+1, D] each env's current plan.
+    :param planned_actions: [n, T, A] its actions (NaN: from inverse dynamics).
+    :param plan_cost: [n] the plan's cost when it was made.
+    :param steps: [n] steps of the current plan executed so far.
+    :param need: [n] envs waiting for a new plan.
+    :param warm: [n] ...that warm-start it from their previous plan, shifted by ``shift``.
+    :param shift: [n] that shift.
+    :param executed: per env, the (s, s', a) executed since its plan began.
+    :param episodes_at_dump: the episode count at the last log dump.
+    """
+
+    plans: np.ndarray
+    planned_actions: np.ndarray
+    plan_cost: np.ndarray
+    steps: np.ndarray
+    need: np.ndarray
+    warm: np.ndarray
+    shift: np.ndarray
+    executed: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]]
+    episodes_at_dump: int
+
+    @classmethod
+    def fresh(cls, num_envs: int, horizon: int, state_dim: int, action_dim: int, episodes: int) -> OnlineLoopState:
+        """The state before the first plan: every env needs one.
+
+        :param num_envs: n.
+        :param horizon: T.
+        :param state_dim: D.
+        :param action_dim: A.
+        :param episodes: the episode count now.
+        :return: the state.
+        """
+        return cls(
+            plans=np.zeros((num_envs, horizon + 1, state_dim), dtype=np.float32),
+            planned_actions=np.full((num_envs, horizon, action_dim), np.nan, dtype=np.float32),
+            plan_cost=np.zeros(num_envs, dtype=np.float32),
+            steps=np.zeros(num_envs, dtype=np.int64),
+            need=np.ones(num_envs, dtype=bool),
+            warm=np.zeros(num_envs, dtype=bool),
+            shift=np.zeros(num_envs, dtype=np.int64),
+            executed=[[] for _ in range(num_envs)],
+            episodes_at_dump=episodes,
+        )
+
+    def fits(self, num_envs: int, horizon: int, state_dim: int, action_dim: int) -> bool:
+        """Whether the state belongs to a loop of these sizes (one saved with other settings does not).
+
+        :return: True when ``plans`` and ``planned_actions`` have the shapes the sizes give.
+        """
+        return self.plans.shape == (num_envs, horizon + 1, state_dim) and self.planned_actions.shape == (
+            num_envs,
+            horizon,
+            action_dim,
+        )
+
+
 class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     """Base class of agents that plan a state trajectory, act along it and learn their model online.
 
@@ -114,6 +178,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.goal_spec: GoalSpec | None = None
         self.num_plans = 0
         self._n_updates = 0
+        self._online_loop: OnlineLoopState | None = None
         if _init_setup_model:
             self._setup_model()
 
@@ -189,6 +254,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """
         check_spaces(env.observation_space, env.action_space, owner=type(self).__name__)
         super().set_env(env, force_reset=force_reset)
+        if force_reset:
+            self._online_loop = None  # the plans in flight belong to the states of the env before the reset
         if self.inverse_dynamics_kind == "ground_truth":
             self._build_inverse_dynamics()
 
@@ -435,6 +502,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             )
         if self.env is None:
             raise ValueError("learn() needs an env: pass it to the constructor, to load(path, env=...), or set_env().")
+        if reset_num_timesteps or self._last_obs is None:
+            self._online_loop = None  # SB3 resets the env: no plan in flight survives that
         total, callback = self._setup_learn(
             int(total_timesteps), callback, reset_num_timesteps, tb_log_name or self.default_tb_log_name, progress_bar
         )
@@ -448,15 +517,13 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         spec = self.goal_spec
         assert env is not None and spec is not None and self._last_obs is not None
         n, horizon = env.num_envs, self.horizon
-        plans = np.zeros((n, horizon + 1, spec.state_dim), dtype=np.float32)
-        planned_actions = np.full((n, horizon, spec.action_dim), np.nan, dtype=np.float32)
-        plan_cost = np.zeros(n, dtype=np.float32)
-        steps = np.zeros(n, dtype=np.int64)  # steps of the current plan executed so far
-        need = np.ones(n, dtype=bool)  # envs waiting for a new plan
-        warm = np.zeros(n, dtype=bool)  # ...that warm-start it from their previous plan, shifted by `shift`
-        shift = np.zeros(n, dtype=np.int64)
-        executed: list[list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = [[] for _ in range(n)]
-        episodes_at_dump = self._episode_num
+        loop = getattr(self, "_online_loop", None)  # a model saved before the loop state existed has none
+        if loop is None or not loop.fits(n, horizon, spec.state_dim, spec.action_dim):
+            loop = OnlineLoopState.fresh(n, horizon, spec.state_dim, spec.action_dim, self._episode_num)
+        self._online_loop = loop
+        # The loop updates these arrays and lists in place, so the agent always holds where it stands.
+        plans, planned_actions, plan_cost, steps = loop.plans, loop.planned_actions, loop.plan_cost, loop.steps
+        need, warm, shift, executed = loop.need, loop.warm, loop.shift, loop.executed
         while self.num_timesteps < total_timesteps:
             obs = self._last_obs
             assert isinstance(obs, dict)
@@ -520,8 +587,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             callback.update_locals(locals())
             if not callback.on_step():
                 break
-            if log_interval and self._episode_num - episodes_at_dump >= log_interval:
-                episodes_at_dump = self._episode_num
+            if log_interval and self._episode_num - loop.episodes_at_dump >= log_interval:
+                loop.episodes_at_dump = self._episode_num
                 self.dump_logs()
         self.dump_logs()
 

@@ -34,7 +34,10 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 if TYPE_CHECKING:  # SB3 loads only inside a run
+    from stable_baselines3.common.callbacks import BaseCallback
+
     from eval.evaluation import EpisodeScores
+    from eval.resume import RunState
 
 EVAL_SEED_OFFSET = 10_000
 """The evaluation env is seeded ``seed + EVAL_SEED_OFFSET`` so that it never replays the training env's episodes."""
@@ -247,6 +250,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
     from eval.evaluation import append_evaluation, evaluate_episodes
     from eval.provenance import defaults_digest, job_fingerprint, machine_info
     from eval.registry import get_agent
+    from eval.resume import discard_run_state, read_run_state, resumable
 
     spec = get_agent(job.agent)
     run_dir = job.run_dir
@@ -261,6 +265,15 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
     )
     eval_kwargs = evaluation_env_kwargs(job)
     eval_env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
+    resume = read_run_state(job) if resumable(model, job) else None
+    if resume is not None:  # go on from the last checkpoint of a run cut short, with its envs as they were
+        fresh_env = model.get_env()
+        if fresh_env is not None:
+            fresh_env.close()
+        eval_env.close()
+        agent_class: Any = type(model)  # resumable() checked that it has load_checkpoint (CheckpointMixin)
+        model = agent_class.load_checkpoint(resume.agent_path, env=resume.train_env, device=job.device, force_reset=False)
+        eval_env = resume.eval_env
     try:
         learn_start = time.perf_counter()
         pretraining: dict[str, Any] | None = None
@@ -270,8 +283,8 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             pretraining = pretrain(model, job)
             timesteps, reused = int(pretraining["dataset_size"]), None
         else:
-            timesteps, reused = _learn_online(model, job, eval_env, spec.callbacks)
-        learn_time = time.perf_counter() - learn_start
+            timesteps, reused = _learn_online(model, job, eval_env, spec.callbacks, resume)
+        learn_time = time.perf_counter() - learn_start + (resume.learn_time_s if resume is not None else 0.0)
         eval_start = time.perf_counter()
         episodes = reused or evaluate_episodes(model, eval_env, job.eval_episodes)
         eval_time = time.perf_counter() - eval_start
@@ -279,7 +292,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
-        wall_time = time.perf_counter() - start
+        wall_time = time.perf_counter() - start + (resume.learn_time_s if resume is not None else 0.0)
         metrics = {
             "env_id": job.env_id,
             "agent": job.agent,
@@ -302,6 +315,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "wall_time_s": wall_time,
             "learn_time_s": learn_time,
             "eval_time_s": eval_time,
+            "resumed_at": [*resume.resumed_at, resume.num_timesteps] if resume is not None else [],
             "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "machine": machine_info(model.device),
             "fingerprint": job_fingerprint(job),
@@ -309,6 +323,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "versions": library_versions(),
         }
         (run_dir / "metrics.json").write_text(json.dumps(to_plain(metrics), indent=2))
+        discard_run_state(job)  # finished: the checkpoint is no longer needed
         return JobResult(
             job=job,
             status="ok",
@@ -338,16 +353,29 @@ def evaluation_env_kwargs(job: Job) -> dict[str, Any]:
     return dict(job.env_kwargs if job.eval_env_kwargs is None else job.eval_env_kwargs)
 
 
-def _learn_online(model: Any, job: Job, eval_env: Any, callbacks: Any) -> tuple[int, EpisodeScores | None]:
-    """``learn`` for exactly the budget with ``EvalCallback`` writing the learning curve.
+def _learn_online(
+    model: Any, job: Job, eval_env: Any, callbacks: Any, resume: RunState | None = None
+) -> tuple[int, EpisodeScores | None]:
+    """``learn`` for exactly the budget with ``EvalCallback`` writing the learning curve (and, for the planning
+    agents, a checkpoint after each evaluation: ``eval.resume``).
 
+    :param resume: the checkpoint the run goes on from (None: a fresh run).
     :return: the transitions consumed and the callback's final-step evaluation when it can stand as the final one.
     """
     from stable_baselines3.common.callbacks import CallbackList, EvalCallback
 
     from eval.evaluation import EvaluationLine, last_evaluation
+    from eval.resume import RunCheckpoint, resumable
 
-    # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
+    after_eval: list[BaseCallback] = []
+    if not job.progress_bar:  # one line per evaluation says that a long run is alive and how far it is
+        after_eval.append(EvaluationLine(str(job.run_dir), job.timesteps))
+    if resumable(model, job):
+        after_eval.append(
+            RunCheckpoint(job, *((resume.learn_time_s, [*resume.resumed_at, resume.num_timesteps]) if resume else ()))
+        )
+    # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each. A resumed run's calls
+    # count from its checkpoint, which was taken at an evaluation, so the later evaluations fall where they would.
     eval_callback = EvalCallback(
         eval_env,
         n_eval_episodes=job.eval_episodes,
@@ -356,14 +384,16 @@ def _learn_online(model: Any, job: Job, eval_env: Any, callbacks: Any) -> tuple[
         deterministic=True,
         verbose=0,
         warn=False,
-        # Without a progress bar, one line per evaluation says that a long run is alive and how far it is.
-        callback_after_eval=None if job.progress_bar else EvaluationLine(str(job.run_dir), job.timesteps),
+        callback_after_eval=CallbackList(after_eval) if after_eval else None,
     )
+    if resume is not None:
+        resume.refill(eval_callback)
     extra = callbacks(job.timesteps) if callbacks is not None else []
     model.learn(
-        total_timesteps=job.timesteps,
+        total_timesteps=job.timesteps - (resume.num_timesteps if resume is not None else 0),
         callback=CallbackList([*extra, eval_callback]),
         tb_log_name=job.tb_log_name,
+        reset_num_timesteps=resume is None,
         progress_bar=job.progress_bar,
     )
     timesteps = int(model.num_timesteps)

@@ -153,6 +153,33 @@ def test_killed_run_resumes_from_latest_checkpoint_to_the_same_step_count(agent_
     assert min(resumed_steps) > 100 and max(resumed_steps) == total
 
 
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_resuming_mid_plan_on_the_env_as_it_was_gives_the_uninterrupted_run(agent_class, tmp_path):
+    # The online loop's plans in flight are part of the checkpoint (OnlineLoopState): resumed on the env as it was
+    # (pickled), without a reset, the run is bit-identical to one that never stopped.
+    import cloudpickle
+    from stable_baselines3.common.env_util import make_vec_env
+
+    def fresh():
+        venv = make_vec_env("ebm/Particle-v0", n_envs=1, seed=0)
+        return make_agent(agent_class, venv), venv
+
+    whole, _ = fresh()
+    whole.learn(240)
+    cut, venv = fresh()
+    cut.learn(119)  # not a multiple of the 3-step horizon: a plan is half executed
+    assert cut._online_loop is not None and (cut._online_loop.steps > 0).any()
+    cut.save_checkpoint(tmp_path / "cut")
+    env_as_it_was = cloudpickle.loads(cloudpickle.dumps(venv))
+    resumed = resumable(agent_class).load_checkpoint(tmp_path / "cut", env=env_as_it_was, force_reset=False)
+    resumed.learn(240 - 119, reset_num_timesteps=False)
+    assert resumed.num_timesteps == 240 and resumed.num_plans == whole.num_plans
+    assert_same_weights(weights(resumed), weights(whole))
+    # A learn that resets the env starts with no plan in flight.
+    resumed.learn(30)
+    assert resumed.num_timesteps == 30
+
+
 def test_checkpoint_restores_numpy_inverse_dynamics(tmp_path):
     agent = make_agent(EBMPlannerAgent, inverse_dynamics="rls")
     agent.learn(60)

@@ -1,0 +1,217 @@
+"""Online runs that resume where they stopped: a checkpoint after each learning-curve evaluation, read back by the
+next ``run_job`` of the same job, continuing exactly as an uninterrupted run would.
+
+A planning agent's online run on the Sawyer takes 2-3 hours on one core, about a session; without this, a run cut
+short (a session's end, a killed process) started again from zero. After each of ``EvalCallback``'s evaluations
+(every ``eval_freq`` transitions) :class:`RunCheckpoint` writes, into ``<run>/resume/``:
+
+- ``agent_<t>.zip``: the agent's resumable checkpoint (``save_checkpoint``: weights, optimiser, replay buffers,
+  generators, and the online loop's plans in flight, ``ebm_agent.base.OnlineLoopState``);
+- ``envs_<t>.pkl``: the training and evaluation VecEnvs as they are (cloudpickle: simulator state, episode step
+  counts, random generators), the learning curve so far and the time spent;
+- ``state.json``, written last: which two files form the checkpoint, with the job's fingerprint and defaults digest.
+
+Each file is written atomically and ``state.json`` names the pair, so a kill at any moment leaves the previous
+checkpoint whole. :func:`read_run_state` accepts a checkpoint only for the same fingerprint and digest; the
+resumed run (``EvalCallback`` refilled with the curve so far) then consumes the rest of the budget, and its
+``metrics.json`` lists where it resumed (``resumed_at``). Same seed, same numbers: a resumed run's weights, curve
+and final scores equal an uninterrupted run's (tested). The folder is removed once the run is finished.
+
+Like ``load``, reading the checkpoint unpickles: it is meant for a run folder this machine wrote.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+
+if TYPE_CHECKING:
+    from stable_baselines3.common.vec_env import VecEnv
+
+    from eval.jobs import Job
+
+RESUME_FOLDER = "resume"
+"""The run folder's subfolder holding the latest checkpoint of an unfinished online run."""
+
+STATE_FILE = "state.json"
+"""The file that names the checkpoint's two files; written last."""
+
+CURVE_KEYS = ("evaluations_timesteps", "evaluations_results", "evaluations_length", "evaluations_successes")
+"""The ``EvalCallback`` lists that hold the learning curve."""
+
+
+def resumable(model: Any, job: Job) -> bool:
+    """Whether a job's run can keep checkpoints: an online run of an agent with ``save_checkpoint``.
+
+    :param model: the agent.
+    :param job: the job.
+    :return: True for the planning agents' online runs (PPO's runs are minutes long and are not checkpointed).
+    """
+    return job.mode == "online" and callable(getattr(model, "save_checkpoint", None))
+
+
+@dataclass
+class RunState:
+    """A checkpoint read back: the agent's file, the envs, the curve so far and the time already spent.
+
+    :param agent_path: the agent's ``save_checkpoint`` file.
+    :param num_timesteps: transitions consumed when it was written.
+    :param train_env: the training VecEnv as it was.
+    :param eval_env: the evaluation VecEnv as it was.
+    :param curve: ``EvalCallback``'s lists (``CURVE_KEYS``) and ``best_mean_reward``/``last_mean_reward``.
+    :param learn_time_s: time spent in ``learn`` up to the checkpoint, over all earlier processes.
+    :param resumed_at: the transitions at which earlier processes resumed, oldest first.
+    """
+
+    agent_path: Path
+    num_timesteps: int
+    train_env: VecEnv
+    eval_env: VecEnv
+    curve: dict[str, Any]
+    learn_time_s: float
+    resumed_at: list[int] = field(default_factory=list)
+
+    def refill(self, callback: EvalCallback) -> None:
+        """Give a new ``EvalCallback`` the learning curve so far, so that its ``evaluations.npz`` holds all of it.
+
+        :param callback: the callback of the resumed run.
+        """
+        for key in CURVE_KEYS:
+            setattr(callback, key, list(self.curve.get(key, [])))
+        callback.best_mean_reward = float(self.curve.get("best_mean_reward", -float("inf")))
+        callback.last_mean_reward = float(self.curve.get("last_mean_reward", -float("inf")))
+        if callback.log_path is not None and callback.evaluations_timesteps:
+            # The file as EvalCallback writes it, at once: the run may not evaluate again before its final one.
+            arrays: dict[str, Any] = {
+                "timesteps": callback.evaluations_timesteps,
+                "results": callback.evaluations_results,
+                "ep_lengths": callback.evaluations_length,
+            }
+            if callback.evaluations_successes:
+                arrays["successes"] = callback.evaluations_successes
+            np.savez(callback.log_path, **arrays)
+
+
+class RunCheckpoint(BaseCallback):
+    """``EvalCallback``'s ``callback_after_eval``: save what resuming the run needs, right after each evaluation.
+
+    No checkpoint is written at the end of the budget: the run is then finished within seconds.
+
+    :param job: the run.
+    :param learn_time_s: time spent in ``learn`` by earlier processes of this run (0 for a fresh one).
+    :param resumed_at: transitions at which earlier processes resumed.
+    """
+
+    def __init__(self, job: Job, learn_time_s: float = 0.0, resumed_at: list[int] | None = None) -> None:
+        super().__init__()
+        self.job = job
+        self.learn_time_before = float(learn_time_s)
+        self.resumed_at = list(resumed_at or [])
+        self._start = time.perf_counter()
+
+    def _init_callback(self) -> None:
+        self._start = time.perf_counter()
+
+    def _on_step(self) -> bool:
+        parent = self.parent
+        if isinstance(parent, EvalCallback) and self.num_timesteps < self.job.timesteps:
+            learn_time = self.learn_time_before + time.perf_counter() - self._start
+            write_run_state(self.job, self.model, parent, learn_time, self.resumed_at)
+        return True
+
+
+def write_run_state(job: Job, model: Any, callback: EvalCallback, learn_time_s: float, resumed_at: list[int]) -> Path:
+    """Write a checkpoint of the run into ``<run>/resume/`` and drop the previous one.
+
+    :param job: the run.
+    :param model: the agent (with ``save_checkpoint``).
+    :param callback: the run's ``EvalCallback`` (its eval env and curve).
+    :param learn_time_s: time spent in ``learn`` so far, over all processes of the run.
+    :param resumed_at: transitions at which earlier processes resumed.
+    :return: the ``state.json`` written.
+    """
+    import cloudpickle
+
+    from ebm_agent.checkpoint_files import atomic_path
+    from eval.provenance import defaults_digest, job_fingerprint
+
+    folder = job.run_dir / RESUME_FOLDER
+    folder.mkdir(parents=True, exist_ok=True)
+    steps = int(model.num_timesteps)
+    agent_file, envs_file = f"agent_{steps}.zip", f"envs_{steps}.pkl"
+    model.save_checkpoint(folder / agent_file)
+    curve: dict[str, Any] = {key: list(getattr(callback, key)) for key in CURVE_KEYS}
+    curve["best_mean_reward"] = float(callback.best_mean_reward)
+    curve["last_mean_reward"] = float(callback.last_mean_reward)
+    payload = {"num_timesteps": steps, "train_env": model.get_env(), "eval_env": callback.eval_env, "curve": curve}
+    with atomic_path(folder / envs_file) as temporary:
+        temporary.write_bytes(cloudpickle.dumps(payload))
+    state = {
+        "fingerprint": job_fingerprint(job),
+        "defaults_digest": defaults_digest(job),
+        "num_timesteps": steps,
+        "agent_file": agent_file,
+        "envs_file": envs_file,
+        "learn_time_s": learn_time_s,
+        "resumed_at": resumed_at,
+        "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    with atomic_path(folder / STATE_FILE) as temporary:
+        temporary.write_text(json.dumps(state, indent=2))
+    for old in folder.iterdir():  # the previous checkpoint, now replaced
+        if old.name not in (agent_file, envs_file, STATE_FILE):
+            old.unlink(missing_ok=True)
+    return folder / STATE_FILE
+
+
+def read_run_state(job: Job) -> RunState | None:
+    """The run's checkpoint, if there is one for this very job (same fingerprint and library defaults).
+
+    A checkpoint of another configuration, or one that cannot be read, is removed and the run starts afresh.
+
+    :param job: the run.
+    :return: the checkpoint, or None.
+    """
+    import pickle
+
+    from eval.provenance import defaults_digest, job_fingerprint, read_json_dict
+
+    folder = job.run_dir / RESUME_FOLDER
+    state = read_json_dict(folder / STATE_FILE)
+    if state is None:
+        return None
+    same = state.get("fingerprint") == job_fingerprint(job) and state.get("defaults_digest") == defaults_digest(job)
+    agent_path, envs_path = folder / str(state.get("agent_file")), folder / str(state.get("envs_file"))
+    payload: dict[str, Any] | None = None
+    if same and agent_path.is_file() and envs_path.is_file():
+        try:
+            payload = pickle.loads(envs_path.read_bytes())
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, ValueError):
+            payload = None
+    if payload is None or payload.get("num_timesteps") != state.get("num_timesteps"):
+        discard_run_state(job)
+        return None
+    return RunState(
+        agent_path=agent_path,
+        num_timesteps=int(state["num_timesteps"]),
+        train_env=payload["train_env"],
+        eval_env=payload["eval_env"],
+        curve=dict(payload["curve"]),
+        learn_time_s=float(state.get("learn_time_s", 0.0)),
+        resumed_at=[int(step) for step in state.get("resumed_at", [])],
+    )
+
+
+def discard_run_state(job: Job) -> None:
+    """Remove the run's checkpoint folder (a finished run, or a checkpoint that does not fit the job).
+
+    :param job: the run.
+    """
+    shutil.rmtree(job.run_dir / RESUME_FOLDER, ignore_errors=True)

@@ -1,0 +1,102 @@
+"""Online runs resume from their last checkpoint and end with the same numbers as an uninterrupted run."""
+
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from eval.jobs import Job, run_job
+from eval.resume import RESUME_FOLDER, STATE_FILE, read_run_state
+
+pytest.importorskip("envs.particle")
+
+FAST = {
+    "horizon": 3,
+    "planner_config": {"num_samples": 8, "iterations": 2},
+    "online": {"pos_buffer_size": 1_000, "neg_buffer_size": 500},
+    "image_log_interval": 0,
+}
+
+
+def _job(out_dir, agent: str = "ebm", **overrides) -> Job:
+    settings = {
+        "env_id": "ebm/Particle-v0",
+        "agent": agent,
+        "seed": 1,
+        "timesteps": 300,
+        "eval_freq": 110,  # not a multiple of the horizon: the checkpoint falls mid-plan
+        "eval_episodes": 2,
+        "hyperparams": FAST if agent == "ebm" else {k: v for k, v in FAST.items() if k != "image_log_interval"},
+        "device": "cpu",
+        "out_dir": str(out_dir),
+    }
+    settings.update(overrides)
+    return Job(**settings)
+
+
+def _kill_after(monkeypatch, agent: str, transitions: int) -> None:
+    """Make the agent's training step raise once ``transitions`` are consumed, as a killed process would stop."""
+    from baselines.action_ff import ActionFFAgent
+    from ebm_agent.agent import EBMPlannerAgent
+
+    agent_class = EBMPlannerAgent if agent == "ebm" else ActionFFAgent
+    original = agent_class._train_on_segments
+
+    def dies_late(self, segments):
+        if self.num_timesteps > transitions:
+            raise RuntimeError("killed")
+        return original(self, segments)
+
+    monkeypatch.setattr(agent_class, "_train_on_segments", dies_late)
+
+
+def _weights(run_dir) -> dict[str, bytes]:
+    with zipfile.ZipFile(run_dir / "model.zip") as archive:
+        return {name: archive.read(name) for name in archive.namelist() if name.endswith(".pth")}
+
+
+@pytest.mark.parametrize("agent", ["ebm", "action-ff"])
+def test_a_run_killed_mid_learn_resumes_to_the_numbers_of_an_uninterrupted_run(tmp_path, monkeypatch, agent):
+    whole = run_job(_job(tmp_path / "whole", agent))
+    assert whole.ok, whole.error
+    assert not (whole.run_dir / RESUME_FOLDER).exists()  # a finished run keeps no checkpoint
+
+    # The same job, killed after transition 250: after the evaluation (and checkpoint) at 220.
+    job = _job(tmp_path / "cut", agent)
+    with monkeypatch.context() as patch:
+        _kill_after(patch, agent, 250)
+        assert run_job(job).status == "failed"
+    state = json.loads((job.run_dir / RESUME_FOLDER / STATE_FILE).read_text())
+    assert state["num_timesteps"] == 220
+    assert sorted(p.name for p in (job.run_dir / RESUME_FOLDER).iterdir()) == ["agent_220.zip", "envs_220.pkl", STATE_FILE]
+
+    resumed = run_job(job)
+    assert resumed.ok, resumed.error
+    metrics = json.loads((job.run_dir / "metrics.json").read_text())
+    reference = json.loads((whole.run_dir / "metrics.json").read_text())
+    assert metrics["resumed_at"] == [220] and reference["resumed_at"] == []
+    assert metrics["timesteps"] == 300 and metrics["budget_respected"]
+    assert metrics["episode_scores"] == reference["episode_scores"]
+    with np.load(job.run_dir / "evaluations.npz") as got, np.load(whole.run_dir / "evaluations.npz") as want:
+        np.testing.assert_array_equal(got["timesteps"], [110, 220, 300])  # the curve before the kill is kept
+        np.testing.assert_array_equal(got["results"], want["results"])
+    assert _weights(job.run_dir) == _weights(whole.run_dir)  # bit-identical networks
+    assert not (job.run_dir / RESUME_FOLDER).exists()
+
+
+def test_a_checkpoint_of_another_configuration_or_torn_is_dropped(tmp_path, monkeypatch):
+    _kill_after(monkeypatch, "ebm", 150)
+    job = _job(tmp_path)
+    assert run_job(job).status == "failed"
+    assert read_run_state(job) is not None
+    other = _job(tmp_path, eval_episodes=3)  # same folder, another fingerprint
+    assert other.run_dir == job.run_dir
+    assert read_run_state(other) is None
+    assert not (job.run_dir / RESUME_FOLDER).exists()
+    # A torn envs file is no checkpoint either: the run starts afresh.
+    assert run_job(job).status == "failed"
+    (job.run_dir / RESUME_FOLDER / "envs_110.pkl").write_bytes(b"torn")
+    assert read_run_state(job) is None
