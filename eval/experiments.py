@@ -337,7 +337,8 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
             seeds = " ".join(map(str, part.seeds))
             line = f"  {part.name:<46} {what:<32} seeds {seeds:<10} ~{format_duration(estimate_part_seconds(part)):<7}"
             measured = measured_part_cost(part, measured_from) if measured_from else None
-            lines.append(f"{line} {measured.describe()}" if measured else line.rstrip())
+            line = f"{line} {measured.describe()}" if measured else line.rstrip()
+            lines.append(line + _in_progress(part))
     total = figures + sum(estimate_job_seconds(job) for job in unique_jobs.values())
     lines += [
         "",
@@ -345,6 +346,19 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
         "of CPU time (runs shared by experiments counted once)",
     ]
     return "\n".join(lines)
+
+
+def _in_progress(part: Part) -> str:
+    """``; resumes: <run> at t/T ...`` for the part's unfinished runs that kept a checkpoint (``eval.resume``)."""
+    from eval.jobs import RESUME_FOLDER, STATE_FILE
+    from eval.provenance import read_json_dict
+
+    found = []
+    for job in part.jobs:
+        state = read_json_dict(job.run_dir / RESUME_FOLDER / STATE_FILE)
+        if state is not None and not (job.run_dir / "metrics.json").exists():
+            found.append(f"{job.agent} seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}")
+    return f"; resumes {', '.join(found)}" if found else ""
 
 
 __all__ = [

@@ -48,6 +48,12 @@ MODES = ("online", "pretrained")
 DATASETS = ("random", "directed", "directed+sequential")
 """Datasets of pretrained jobs (paper Table 2); see ``eval.pretraining``."""
 
+RESUME_FOLDER = "resume"
+"""The run folder's subfolder holding the latest checkpoint of an unfinished online run (``eval.resume``)."""
+
+STATE_FILE = "state.json"
+"""The file in ``RESUME_FOLDER`` that names the checkpoint's two files; written last."""
+
 RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", "error.txt")
 """Files a run writes; a rerun removes stale ones first (an old ``evaluations.npz`` would join the new curve)."""
 

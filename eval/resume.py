@@ -32,16 +32,15 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from eval.jobs import RESUME_FOLDER, STATE_FILE
+
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
 
     from eval.jobs import Job
 
-RESUME_FOLDER = "resume"
-"""The run folder's subfolder holding the latest checkpoint of an unfinished online run."""
+__all__ = ["RESUME_FOLDER", "STATE_FILE", "RunCheckpoint", "RunState", "discard_run_state", "read_run_state"]
 
-STATE_FILE = "state.json"
-"""The file that names the checkpoint's two files; written last."""
 
 CURVE_KEYS = ("evaluations_timesteps", "evaluations_results", "evaluations_length", "evaluations_successes")
 """The ``EvalCallback`` lists that hold the learning curve."""

@@ -50,3 +50,18 @@ def test_the_listing_prints_measured_times_beside_the_estimates(tmp_path):
     assert f"~{format_duration(estimate_part_seconds(part))}" in line
     assert line.endswith("measured 1.7 h (6/6 runs)")
     assert "measured" not in next(line for line in text.splitlines() if "table1/reacher/online" in line)
+
+
+def test_the_listing_names_unfinished_runs_that_kept_a_checkpoint(tmp_path):
+    from eval.jobs import RESUME_FOLDER, STATE_FILE
+
+    part = _part(tmp_path, "table1/maze/online")
+    job = part.jobs[0]
+    (job.run_dir / RESUME_FOLDER).mkdir(parents=True)
+    (job.run_dir / RESUME_FOLDER / STATE_FILE).write_text('{"num_timesteps": 20000}')
+    text = describe_experiments(make_context("paper", str(tmp_path)), [tmp_path])
+    line = next(line for line in text.splitlines() if "table1/maze/online" in line)
+    assert line.endswith(f"; resumes {job.agent} seed {job.seed} at 20000/{job.timesteps}")
+    _finish(job.run_dir, 1_000.0)  # a finished run is not in progress, whatever its folder still holds
+    text = describe_experiments(make_context("paper", str(tmp_path)), [tmp_path])
+    assert "resumes" not in next(line for line in text.splitlines() if "table1/maze/online" in line)
