@@ -1,0 +1,26 @@
+"""scripts/sawyer_plan_gap.py: the real finger distance beside the one the plans claim, along an episode."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import envs  # noqa: F401
+from ebm_agent import EBMPlannerAgent
+
+pytest.importorskip("mujoco")
+
+
+def test_it_prints_the_real_and_the_planned_distance(load_script, tmp_path, capsys):
+    script = load_script("sawyer_plan_gap")
+    env = gym.make("ebm/SawyerReach-v0")
+    agent = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu", planner_config={"num_samples": 8, "iterations": 2})
+    agent.save(tmp_path / "sawyer.zip")
+    rows = script.main([str(tmp_path / "sawyer.zip"), "--steps", "4", "--every", "2"])
+    assert [row["step"] for row in rows] == [0, 2]
+    start = env.reset(seed=script.EVAL_SEED_OFFSET)[0]
+    first = np.linalg.norm(start["observation"][agent.goal_spec.goal_indices] - start["desired_goal"])
+    assert rows[0]["distance"] == pytest.approx(first)
+    assert all(0 <= row["max_torque"] <= 1 and np.isfinite(row["plan_error"]) for row in rows)
+    assert "| 2 |" in capsys.readouterr().out
