@@ -269,7 +269,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         flags = ", ".join("--" + key.replace("_", "-") for key in given)
         raise ValueError(
             f"{flags}: not with --experiment, whose experiments fix their envs, agents and budgets "
-            "(choose --scale, --seeds and --part instead)"
+            "(choose --scale, --seeds, --part and --agents instead)"
         )
     names = list(args.experiment or ["all"])
     known = [*EXPERIMENTS, "all", "list"]
@@ -285,6 +285,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     settings: dict[str, Any] = {
         "experiments": names,
         "parts": list(args.part) if args.part else None,
+        "agents": list(args.agents) if args.agents else None,
         "scale": scale,
         "seeds": list(args.seeds) if args.seeds else None,
         "out": out,

@@ -23,7 +23,7 @@ import sys
 import time
 import traceback
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -306,7 +306,31 @@ def selected_parts(settings: dict[str, Any]) -> list[Part]:
     if settings["experiments"] == ["list"] or settings["report_only"]:
         return []
     context = make_context(settings["scale"], settings["out"], settings["seeds"], settings["device"])
-    return select_parts(build_parts(settings["experiments"], context), settings["parts"])
+    parts = select_parts(build_parts(settings["experiments"], context), settings["parts"])
+    return only_agents(parts, settings.get("agents"))
+
+
+def only_agents(parts: Sequence[Part], agents: Sequence[str] | None) -> list[Part]:
+    """The parts' cells of these agents only (``--agents`` with ``--experiment``); figure parts are left out.
+
+    This splits a part's runs between processes or machines, e.g. the EBM runs of a Table 2 column here and its
+    Action FF runs elsewhere; each finished run is recorded and reported as usual.
+
+    :param parts: the selected parts.
+    :param agents: agent names, or None for all.
+    :return: the parts that still hold a cell, with only those cells.
+    :raises ValueError: when no selected part has a run of these agents.
+    """
+    if not agents:
+        return list(parts)
+    kept = [
+        replace(part, cells=tuple(cell for cell in part.cells if cell.agent in agents))
+        for part in parts
+        if part.figure is None and any(cell.agent in agents for cell in part.cells)
+    ]
+    if not kept:
+        raise ValueError(f"--agents {' '.join(agents)}: the selected parts have no run of these agents")
+    return kept
 
 
 def run_experiments(

@@ -42,7 +42,7 @@ RESULTS_DIR = "runs/results"
 PAPER_DOC = "docs/results.md"
 """Default document of ``--experiment`` at the paper's scale (other scales write ``<out>/results.md``)."""
 
-SWEEP_ONLY = ("env", "baseline", "agents", "timesteps", "eval_episodes", "eval_freq", "config", "env_kwargs")
+SWEEP_ONLY = ("env", "baseline", "timesteps", "eval_episodes", "eval_freq", "config", "env_kwargs")
 SWEEP_ONLY_MORE = ("eval_env_kwargs", "hyperparams")
 EXPERIMENT_ONLY = ("part", "scale", "docs", "records")
 
@@ -157,7 +157,8 @@ def build_parser() -> argparse.ArgumentParser:
         action="extend",
         choices=list(AGENTS),
         metavar="NAME",
-        help=f"the full list of agents, replacing EBM + baselines: {', '.join(AGENTS)}",
+        help=f"the full list of agents, replacing EBM + baselines: {', '.join(AGENTS)}; with --experiment, only "
+        "the runs of these agents (figures are left out)",
     )
     parser.add_argument(
         "-n",

@@ -285,6 +285,7 @@ def test_a_failing_figure_is_reported_not_raised(tmp_path, monkeypatch):
         (["--experiment", "table1", "--scale", "huge"], "unknown scale 'huge'"),
         (["--experiment", "list", "table1"], "--experiment list prints the experiments; give it alone"),
         (["--part", "table1/*"], "--part: only with --experiment"),
+        (["--experiment", "plan_diversity", "--agents", "ebm"], "the selected parts have no run of these agents"),
     ],
 )
 def test_bad_experiment_flags_exit_2_with_a_clear_message(argv, message, capsys):
@@ -300,6 +301,15 @@ def test_experiment_list_prints_parts_and_cost(capsys):
     for name in ("table1/particle/pretrained", "table2/sawyer/pretrained_directed_sequential", "sawyer_ppo/10x"):
         assert name in text
     assert "~" in text and "CPU time" in text
+
+
+def test_experiment_agents_runs_only_those_agents_cells(tmp_path, capsys):
+    argv = ["--experiment", "table1", "--part", "table1/particle/online", "--scale", "smoke", "-f", str(tmp_path)]
+    assert main([*argv, "--agents", "action-ff", "--no-progress"]) == 0
+    assert "1 run(s) to do, 0 already complete" in capsys.readouterr().err
+    assert {p.parent.parent.name for p in tmp_path.glob("smoke/online/particle/*/seed_*/metrics.json")} == {"action-ff"}
+    assert main([*argv, "--no-progress"]) == 0  # the whole part: the Action FF run is done, the EBM's is not
+    assert "1 run(s) to do, 1 already complete" in capsys.readouterr().err
 
 
 def test_experiment_cli_runs_a_smoke_part_then_skips_it(tmp_path, capsys):
