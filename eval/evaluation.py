@@ -100,8 +100,9 @@ class EvaluationLine(BaseCallback):
 
     A long run without a progress bar (``ebm-eval --no-progress`` into a log file; a Sawyer run takes hours) would
     otherwise stay silent until it ends. The line gives the run, the transitions so far out of the budget, the
-    evaluation's mean score and success rate, the time since ``learn`` started and a linear estimate of the time
-    left (evaluations included). Parallel runs' lines interleave but each names its run.
+    evaluation's mean score and success rate, the time since ``learn`` started in this process and a linear estimate
+    of the time left from this process's pace (evaluations included). Parallel runs' lines interleave but each
+    names its run.
 
     :param label: the run's name in the line (e.g. its folder).
     :param budget: the run's transition budget.
@@ -115,9 +116,11 @@ class EvaluationLine(BaseCallback):
         self.stream = stream
         self.lines: list[str] = []
         self._start = time.perf_counter()
+        self._start_steps = 0
 
     def _init_callback(self) -> None:
         self._start = time.perf_counter()
+        self._start_steps = int(self.model.num_timesteps)  # a resumed run starts past 0
 
     def _on_step(self) -> bool:
         parent = self.parent
@@ -128,7 +131,7 @@ class EvaluationLine(BaseCallback):
         if len(parent.evaluations_successes) == len(parent.evaluations_results):
             success = f", success {np.mean(parent.evaluations_successes[-1]):.2f}"
         elapsed = time.perf_counter() - self._start
-        done = max(self.num_timesteps, 1)
+        done = max(self.num_timesteps - self._start_steps, 1)  # transitions this process has consumed
         left = elapsed / done * max(self.budget - self.num_timesteps, 0)
         line = (
             f"{self.label}: {self.num_timesteps}/{self.budget} transitions, evaluation {scores.mean():.2f} "
