@@ -28,6 +28,12 @@ ACTING_SHARE = 3.0
 """A planning agent's evaluation step costs about a third of a learning step (no energy training, warm-started
 plans): the maze online runs, whose 60,000 evaluation steps would otherwise double their estimate, took 11-25 min."""
 
+STEP_SECONDS_BY_AGENT: dict[tuple[str, str], tuple[float, float]] = {("sawyer", "action-ff"): (0.008, 0.014)}
+"""(learning, acting) CPU seconds per step where an agent's cost differs from the env's planning cost. The Action FF
+plans torques and needs no inverse dynamics, which is most of the EBM's Sawyer step: its pretrained evaluations took
+135-142 s per 10,000 steps (0.014 a step) and its online fixed-goal run (seed 0, 2026-12-02, two processes on 2
+cores) 18.4 min to its last curve evaluation, of which about 700 s were the 50,000 evaluation steps."""
+
 PPO_SECONDS_PER_STEP = 0.001
 """Rough CPU seconds per PPO transition (docs/benchmarks.md: about 2,000 transitions/s on the particle)."""
 
@@ -69,6 +75,7 @@ def estimate_job_seconds(job: Job) -> float:
     """
     per_step = PPO_SECONDS_PER_STEP if job.agent == "ppo" else SECONDS_PER_STEP.get(job.env_short, 0.01)
     act = 0.0001 if job.agent == "ppo" else per_step / ACTING_SHARE
+    per_step, act = STEP_SECONDS_BY_AGENT.get((job.env_short, job.agent), (per_step, act))
     episode = _episode_length(job)
     extra = 1 + len(job.extra_evaluations)
     if job.mode == "online":

@@ -5,7 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from eval.estimates import MeasuredCost, estimate_part_seconds, format_duration, measured_part_cost
+from eval.estimates import (
+    MeasuredCost,
+    estimate_job_seconds,
+    estimate_part_seconds,
+    format_duration,
+    measured_part_cost,
+)
 from eval.experiments import build_parts, describe_experiments, make_context
 
 
@@ -65,3 +71,11 @@ def test_the_listing_names_unfinished_runs_that_kept_a_checkpoint(tmp_path):
     _finish(job.run_dir, 1_000.0)  # a finished run is not in progress, whatever its folder still holds
     text = describe_experiments(make_context("paper", str(tmp_path)), [tmp_path])
     assert "resumes" not in next(line for line in text.splitlines() if "table1/maze/online" in line)
+
+
+def test_the_action_ff_sawyer_run_is_priced_without_the_inverse_dynamics(tmp_path):
+    part = _part(tmp_path, "table2/sawyer/online_fixed")
+    by_agent = {job.agent: estimate_job_seconds(job) for job in part.jobs if job.seed == 0}
+    # Measured 2026-12-02: about 21 min for the Action FF's run, about 2.5 h for the EBM's.
+    assert 15 * 60 < by_agent["action-ff"] < 30 * 60
+    assert by_agent["ebm"] > 5 * by_agent["action-ff"]
