@@ -28,7 +28,9 @@ def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
     assert "untrained agent" in explain("table1/particle/online", "ebm")
     assert "off by one" in explain("table1/particle/online", "action-ff")
     assert "change of state" in explain("table1/reacher/pretrained", "action-ff")
-    assert explain("table2/sawyer/online_fixed", "action-ff") == "not investigated yet."
+    assert "no inverse dynamics" in explain("table2/sawyer/online_fixed", "action-ff")
+    assert "finger drifts away" in explain("inverse_dynamics/sawyer", "ebm")
+    assert explain("table2/sawyer/pretrained_random", "ppo") == "not investigated yet."
 
 
 def test_the_section_lists_each_difference_with_its_reason():
