@@ -108,7 +108,7 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's only in scale.",
     ),
     Explanation(
-        "table2/sawyer/online_*",
+        "*/sawyer*",  # the online fixed- and variable-goal runs, and the fixed-goal model on variable goals
         "action-ff",
         "Our Action FF predicts the change of state (docs/baselines.md, 'Residual by default'), where the original "
         "predicted the absolute next state, and it plans torques through that model, so it needs no inverse dynamics "
