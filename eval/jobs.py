@@ -235,6 +235,10 @@ def run_job(job: Job) -> JobResult:
     run_dir = job.run_dir
     try:
         run_dir.mkdir(parents=True, exist_ok=True)
+        holder = _take_run_lock(run_dir)
+    except Exception:  # another live process owns the folder: leave its files alone
+        return JobResult(job=job, status="failed", wall_time_s=0.0, error=traceback.format_exc())
+    try:
         for name in RUN_OUTPUTS:
             (run_dir / name).unlink(missing_ok=True)
         config = {**to_plain(asdict(job)), "fingerprint": job_fingerprint(job), "versions": library_versions()}
@@ -247,6 +251,60 @@ def run_job(job: Job) -> JobResult:
         except OSError:
             pass
         return JobResult(job=job, status="failed", wall_time_s=time.perf_counter() - start, error=error)
+    finally:
+        holder.unlink(missing_ok=True)
+
+
+RUN_LOCK = ".running"
+"""A run folder's lock file while a process trains in it: ``{"host", "pid"}``."""
+
+
+def _take_run_lock(run_dir: Path) -> Path:
+    """Claim a run folder for this process, so that a second invocation of the same run cannot clobber it.
+
+    A lock left by a process that no longer exists on this host (killed, crashed) is taken over.
+
+    :param run_dir: the folder.
+    :return: the lock file, to remove when the run ends.
+    :raises RuntimeError: when a live process (or one on another host) holds the folder.
+    """
+    import os
+    import socket
+
+    lock = run_dir / RUN_LOCK
+    mine = {"host": socket.gethostname(), "pid": os.getpid()}
+    for _ in range(2):
+        try:
+            with open(lock, "x") as handle:  # atomic: exactly one process creates it
+                handle.write(json.dumps(mine))
+            return lock
+        except FileExistsError:
+            try:
+                held = json.loads(lock.read_text())
+            except (OSError, ValueError):
+                held = {}
+            if held.get("host") == mine["host"] and not _alive(int(held.get("pid", -1))):
+                lock.unlink(missing_ok=True)  # stale: its process is gone
+                continue
+            raise RuntimeError(
+                f"{run_dir} is being trained by process {held.get('pid')} on {held.get('host')}: two processes must not "
+                f"share a run folder. Wait for it, or, if no such process runs any more, delete {lock}."
+            ) from None
+    raise RuntimeError(f"could not claim {run_dir} ({lock} keeps reappearing)")
+
+
+def _alive(pid: int) -> bool:
+    import os
+
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, owned by someone else
+        return True
+    return True
 
 
 def _train_and_evaluate(job: Job, start: float) -> JobResult:

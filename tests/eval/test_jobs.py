@@ -116,3 +116,23 @@ def test_register_agent_checks_its_input():
 )
 def test_env_short_name(env_id, short):
     assert env_short_name(env_id) == short
+
+
+def test_a_run_folder_held_by_a_live_process_is_left_alone_and_a_stale_lock_taken_over(tmp_path):
+    import json as json_module
+    import os
+    import socket
+
+    from eval.jobs import RUN_LOCK
+
+    job = _job(tmp_path)
+    job.run_dir.mkdir(parents=True)
+    (job.run_dir / "metrics.json").write_text("{}")  # the other process's files must survive
+    lock = job.run_dir / RUN_LOCK
+    lock.write_text(json_module.dumps({"host": socket.gethostname(), "pid": os.getppid()}))  # alive: our parent
+    result = run_job(job)
+    assert result.status == "failed" and "two processes must not share a run folder" in result.error
+    assert (job.run_dir / "metrics.json").read_text() == "{}" and lock.exists()
+    lock.write_text(json_module.dumps({"host": socket.gethostname(), "pid": 2**22 + 12345}))  # no such process
+    assert run_job(job).ok
+    assert not lock.exists()  # released when the run ends
