@@ -312,7 +312,7 @@ class MPPIPlanner:
         if limit is None:
             limit = CPU_CHUNK_TRANSITIONS if candidates.device.type == "cpu" else 0
         num_envs, num_candidates = candidates.shape[:2]
-        per_chunk = max(1, limit // (num_envs * self.horizon))
+        per_chunk = max(1, limit // max(num_envs * self.horizon, 1))  # no env at all: one (empty) chunk
         if limit == 0 or per_chunk >= num_candidates:
             return bind_cost(cost_fn, candidates, goals)
         chunks = [

@@ -142,6 +142,8 @@ PLANNERS = {dim: make_planner(dim) for dim in (1, 2, 3)}
     values=st.floats(-5, 5),
     warm_start=st.booleans(),
 )
+# Found by hypothesis on 2026-12-02: no env at all divided by zero when sizing the cost chunks.
+@example(state_dim=1, start_shape=(0, 1), goal_shape=(0, 0), dtype=torch.float32, values=0.0, warm_start=False)
 def test_planner_gives_finite_plans_from_the_start_or_a_documented_error(
     state_dim, start_shape, goal_shape, dtype, values, warm_start
 ):
