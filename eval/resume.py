@@ -39,7 +39,16 @@ if TYPE_CHECKING:
 
     from eval.jobs import Job
 
-__all__ = ["RESUME_FOLDER", "STATE_FILE", "RunCheckpoint", "RunState", "discard_run_state", "read_run_state"]
+__all__ = [
+    "RESUME_FOLDER",
+    "STATE_FILE",
+    "RunCheckpoint",
+    "RunState",
+    "discard_run_state",
+    "read_run_state",
+    "resumable",
+    "write_run_state",
+]
 
 
 CURVE_KEYS = ("evaluations_timesteps", "evaluations_results", "evaluations_length", "evaluations_successes")
