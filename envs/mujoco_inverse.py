@@ -20,9 +20,11 @@ import mujoco
 import numpy as np
 from mujoco import rollout
 
-ResidualFn = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
+ResidualFn = Callable[..., np.ndarray]
 """``residual(qpos_end [B, M, nq], qvel_end [B, M, nv], targets [B, 1, T]) -> [B, M, R]``: the weighted mismatch of
-M rolled-out end states per sample with that sample's wanted next state (``targets`` as given to ``solve``)."""
+M rolled-out end states per sample with that sample's wanted next state (``targets`` as given to ``solve``). A solver
+built with ``end_sensors=True`` passes the model's sensor readings at the end states as a fourth argument
+``sensors_end [B, M, nsensordata]`` (e.g. ``framepos`` sensors of a fingertip)."""
 
 _STEP_SCALES = np.array([0.5, 0.25, 0.1])
 """Fractions of the Gauss-Newton step tried by the line search when the full step does not help."""
@@ -42,6 +44,7 @@ class FrameSkipInverseDynamics:
     :param scan_points: values per control dim in the rescue's coordinate scan (0: no scan).
     :param rescue_starts: random candidate controls per stalled sample in the rescue.
     :param rescue_keep: candidates per stalled sample that the rescue refines.
+    :param end_sensors: also pass the model's sensor readings at each rolled-out end state to the residual.
     """
 
     def __init__(
@@ -56,9 +59,12 @@ class FrameSkipInverseDynamics:
         scan_points: int = 41,
         rescue_starts: int = 128,
         rescue_keep: int = 8,
+        end_sensors: bool = False,
     ) -> None:
         if frame_skip < 1:
             raise ValueError(f"frame_skip must be >= 1, got {frame_skip}.")
+        if end_sensors and model.nsensordata < 1:
+            raise ValueError("end_sensors=True needs a model with sensors; this one has none.")
         if model.nu < 1:
             raise ValueError("The model has no actuators; inverse dynamics needs at least one.")
         self.model = copy.copy(model)
@@ -77,6 +83,7 @@ class FrameSkipInverseDynamics:
         self.scan_points = int(scan_points)
         self.rescue_starts = int(rescue_starts)
         self.rescue_keep = int(rescue_keep)
+        self.end_sensors = bool(end_sensors)
         self.ctrl_low = self.model.actuator_ctrlrange[:, 0].copy()
         self.ctrl_high = self.model.actuator_ctrlrange[:, 1].copy()
         self._state_spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -128,14 +135,26 @@ class FrameSkipInverseDynamics:
         return ctrl, cost
 
     # ------------------------------------------------------------------------------------------------- internals
-    def _end_states(self, start: np.ndarray, ctrl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Roll out M candidate controls [B, M, nu] from each of B start states; end states [B, M, nq], [B, M, nv]."""
+    def _end_states(self, start: np.ndarray, ctrl: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Roll out M candidate controls [B, M, nu] from each of B start states.
+
+        :return: end states [B, M, nq], [B, M, nv], and with ``end_sensors`` their sensor readings [B, M, nsensordata].
+        """
         batch, candidates, nu = ctrl.shape
         starts = np.repeat(start, candidates, axis=0)  # [B * M, nstate]
-        # A [B * M, 1, nu] control is held (tiled) over the frame_skip steps by rollout.
-        states, _ = rollout.rollout(self.model, self.data, starts, ctrl.reshape(-1, 1, nu), nstep=self.frame_skip)
+        # A [B * M, 1, nu] control is held (tiled) over the frame_skip steps by rollout; it records the sensors of
+        # the state after each step.
+        states, sensors = rollout.rollout(self.model, self.data, starts, ctrl.reshape(-1, 1, nu), nstep=self.frame_skip)
         final = states[:, -1, :].reshape(batch, candidates, -1)  # [B, M, nstate]
-        return final[..., self._qpos_slice], final[..., self._qvel_slice]
+        ends: tuple[np.ndarray, ...] = (final[..., self._qpos_slice], final[..., self._qvel_slice])
+        if self.end_sensors:
+            ends += (sensors[:, -1, :].reshape(batch, candidates, -1),)  # [B, M, nsensordata]
+        return ends
+
+    def _residual_of(self, start: np.ndarray, ctrl: np.ndarray, targets: np.ndarray, residual: ResidualFn) -> np.ndarray:
+        """Residual [B, M, R] of M candidate controls [B, M, nu] per sample."""
+        qpos, qvel, *sensors = self._end_states(start, ctrl)
+        return residual(qpos, qvel, targets, *sensors)
 
     def _refine(
         self, start: np.ndarray, ctrl: np.ndarray, targets: np.ndarray, residual: ResidualFn
@@ -179,7 +198,7 @@ class FrameSkipInverseDynamics:
         """Forward-difference Jacobian [B, R, nu] of the residual at ``ctrl`` [B, nu] (current residual [B, R])."""
         nu = ctrl.shape[1]
         probes = ctrl[:, None, :] + self.fd_step * np.eye(nu)  # [B, nu, nu]: one perturbed copy per control dim
-        perturbed = residual(*self._end_states(start, probes), targets)  # [B, nu, R]
+        perturbed = self._residual_of(start, probes, targets, residual)  # [B, nu, R]
         return np.swapaxes((perturbed - current[:, None, :]) / self.fd_step, 1, 2)
 
     def _step(
@@ -205,7 +224,7 @@ class FrameSkipInverseDynamics:
         if worse.size:
             shorter = ctrl[worse, None, :] - _STEP_SCALES[None, :, None] * step[worse, None, :]  # [W, L, nu]
             shorter = np.clip(shorter, self.ctrl_low, self.ctrl_high)
-            shorter_residual = residual(*self._end_states(start[worse], shorter), targets[worse])  # [W, L, R]
+            shorter_residual = self._residual_of(start[worse], shorter, targets[worse], residual)  # [W, L, R]
             best = np.argmin(np.sum(shorter_residual**2, axis=-1), axis=1)
             trial[worse] = shorter[np.arange(worse.size), best]
             trial_residual[worse] = shorter_residual[np.arange(worse.size), best]
@@ -218,7 +237,7 @@ class FrameSkipInverseDynamics:
 
     def _residual(self, start: np.ndarray, ctrl: np.ndarray, targets: np.ndarray, residual: ResidualFn) -> np.ndarray:
         """Residual [B, R] of controls [B, nu]."""
-        return residual(*self._end_states(start, ctrl[:, None, :]), targets)[:, 0, :]
+        return self._residual_of(start, ctrl[:, None, :], targets, residual)[:, 0, :]
 
     def _rescue(
         self, start: np.ndarray, ctrl: np.ndarray, targets: np.ndarray, residual: ResidualFn
@@ -245,7 +264,7 @@ class FrameSkipInverseDynamics:
             axis=1,
         )  # [S, C, nu]
         candidates = np.clip(candidates, self.ctrl_low, self.ctrl_high)
-        cost = np.sum(residual(*self._end_states(start, candidates), targets) ** 2, axis=-1)  # [S, C]
+        cost = np.sum(self._residual_of(start, candidates, targets, residual) ** 2, axis=-1)  # [S, C]
         keep = min(self.rescue_keep, candidates.shape[1])
         chosen = np.argsort(cost, axis=1)[:, :keep]  # [S, keep]
         starts = candidates[np.arange(batch)[:, None], chosen].reshape(-1, nu)  # [S * keep, nu]
@@ -263,7 +282,7 @@ class FrameSkipInverseDynamics:
         for dim in range(nu):
             candidates = np.repeat(ctrl[:, None, :], self.scan_points + 1, axis=1)  # [B, P+1, nu]; slot 0 keeps ctrl
             candidates[:, 1:, dim] = grid[:, dim]
-            cost = np.sum(residual(*self._end_states(start, candidates), targets) ** 2, axis=-1)  # [B, P+1]
+            cost = np.sum(self._residual_of(start, candidates, targets, residual) ** 2, axis=-1)  # [B, P+1]
             ctrl = candidates[np.arange(batch), np.argmin(cost, axis=1)]
         return ctrl
 

@@ -43,6 +43,15 @@ TARGET_HIGH = np.array([0.3, 0.85, 0.35])
 
 GOAL_MODES = ("fixed", "variable", None)
 
+INVERSE_FINGER_WEIGHT = 100.0
+"""Default weight of the finger xyz (metres) against the joint dims (qpos rad, qvel / 10) in the ground-truth
+inverse dynamics. A plan's finger dims can disagree with its joint dims (nothing but the learned energy ties them);
+matching the joints only then moves the real finger away from where the plan puts it, and the EBM never reaches the
+target (docs/agent.md). The original scored all 20 observation dims with equal weights."""
+
+FINGER_SENSORS = ("finger_right", "finger_left")
+"""``framepos`` sensors of the two finger-pad sites (their mean is the finger); the inverse dynamics reads them."""
+
 
 class SawyerReachEnv(gym.Env):
     """Torque-controlled 7-DoF Sawyer reaching for a target with its finger.
@@ -51,6 +60,8 @@ class SawyerReachEnv(gym.Env):
         (exploration: no goal; the target is the finger itself, so the reward is 0 and nothing is a success).
     :param success_threshold: finger-target distance (m) below which a step counts as a success.
     :param reset_noise_scale: half-width (rad) of the uniform noise added to each joint of ``RESET_QPOS``.
+    :param inverse_finger_weight: weight of the finger xyz against the joint dims in ``inverse_dynamics`` (0: match
+        the joints only); see ``INVERSE_FINGER_WEIGHT``.
     :param render_mode: ``None`` or ``"rgb_array"``.
     :param width: render width in pixels.
     :param height: render height in pixels.
@@ -62,11 +73,16 @@ class SawyerReachEnv(gym.Env):
     frame_skip: int = 5
     """Physics steps (2.5 ms each) per env step, as in Metaworld."""
 
+    inverse_dynamics_arguments: ClassVar[dict[str, Any]] = {"inverse_finger_weight": 0.0}
+    """Constructor arguments that change only ``inverse_dynamics``, each with the value that reproduces runs made
+    before it existed (``eval.registry.env_inverse_dynamics_defaults``)."""
+
     def __init__(
         self,
         goal: str | None = "fixed",
         success_threshold: float = 0.05,
         reset_noise_scale: float = 0.01,
+        inverse_finger_weight: float = INVERSE_FINGER_WEIGHT,
         render_mode: str | None = None,
         width: int = 256,
         height: int = 256,
@@ -79,7 +95,10 @@ class SawyerReachEnv(gym.Env):
             raise ValueError(f"success_threshold must be > 0 (metres), got {success_threshold}.")
         if reset_noise_scale < 0:
             raise ValueError(f"reset_noise_scale must be >= 0 (radians), got {reset_noise_scale}.")
+        if not (np.isfinite(inverse_finger_weight) and inverse_finger_weight >= 0):
+            raise ValueError(f"inverse_finger_weight must be finite and >= 0, got {inverse_finger_weight}.")
         self.goal_mode = goal
+        self.inverse_finger_weight = float(inverse_finger_weight)
         self.success_threshold = float(success_threshold)
         self.reset_noise_scale = float(reset_noise_scale)
         self.render_mode = render_mode
@@ -92,7 +111,7 @@ class SawyerReachEnv(gym.Env):
         self.physics_steps = 0
         """Physics steps taken since construction."""
         self._finger_sites = [self.model.site("rightEndEffector").id, self.model.site("leftEndEffector").id]
-        self._inverse = FrameSkipInverseDynamics(self.model, self.frame_skip)
+        self._inverse = FrameSkipInverseDynamics(self.model, self.frame_skip, end_sensors=self.inverse_finger_weight > 0)
         self._renderer: mujoco.Renderer | None = None
         self._target = FIXED_TARGET.copy()  # [3]
         self._exploration_qpos: np.ndarray | None = None
@@ -229,8 +248,9 @@ class SawyerReachEnv(gym.Env):
         """Torques that carry each state to its next state over one env step (MuJoCo inverse dynamics, refined).
 
         Starts from ``mj_inverse`` with the mean acceleration of the step and refines it on the simulator (see
-        ``envs.mujoco_inverse``); the fit uses the joint dims (qpos and qvel / 10, equally weighted), since the finger
-        and target dims follow from qpos or carry no dynamics.
+        ``envs.mujoco_inverse``); the fit uses the joint dims (qpos and qvel / 10, equally weighted) and the finger
+        xyz weighted by ``inverse_finger_weight``; the target dims carry no dynamics. The finger follows from qpos
+        for real states (any weight recovers their actions), but a plan's finger dims can disagree with its joints.
 
         :param states: [B, 20] (or [20]) observations.
         :param next_states: [B, 20] (or [20]) wanted next observations.
@@ -247,7 +267,13 @@ class SawyerReachEnv(gym.Env):
         single = states.ndim == 1
         states, next_states = np.atleast_2d(states), np.atleast_2d(next_states)
         actions, _ = self._inverse.solve(
-            states[:, :7], 10.0 * states[:, 7:14], 10.0 * next_states[:, 7:14], next_states[:, :14], _joint_residual
+            states[:, :7],
+            10.0 * states[:, 7:14],
+            10.0 * next_states[:, 7:14],
+            next_states[:, :17],
+            functools.partial(_joint_finger_residual, weight=self.inverse_finger_weight)
+            if self.inverse_finger_weight > 0
+            else _joint_residual,
         )
         actions = actions.astype(self.action_space.dtype)
         return actions[0] if single else actions
@@ -268,8 +294,21 @@ class SawyerReachEnv(gym.Env):
 
 
 def _joint_residual(qpos_end: np.ndarray, qvel_end: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """Mismatch [B, M, 14] of rolled-out end states with the wanted joint states [B, 1, 14] (qpos, qvel / 10)."""
+    """Mismatch [B, M, 14] of rolled-out end states with the wanted joint states (targets [B, 1, 17]: qpos, qvel / 10,
+    finger xyz)."""
     return np.concatenate([qpos_end - targets[..., :7], qvel_end / 10.0 - targets[..., 7:14]], axis=-1)
+
+
+def _joint_finger_residual(
+    qpos_end: np.ndarray, qvel_end: np.ndarray, targets: np.ndarray, sensors_end: np.ndarray, *, weight: float
+) -> np.ndarray:
+    """Mismatch [B, M, 17] of rolled-out end states with the wanted joint and finger states [B, 1, 17].
+
+    ``sensors_end`` [B, M, 6] are the ``FINGER_SENSORS`` readings (right xyz, left xyz) at the end states; the finger
+    mismatch is multiplied by ``weight``.
+    """
+    finger = 0.5 * (sensors_end[..., :3] + sensors_end[..., 3:6])  # [B, M, 3]
+    return np.concatenate([_joint_residual(qpos_end, qvel_end, targets), weight * (finger - targets[..., 14:17])], axis=-1)
 
 
 def _validate_target(target: Any) -> np.ndarray:
@@ -317,6 +356,8 @@ def sawyer_model() -> mujoco.MjModel:
     for body in spec.bodies:
         body.gravcomp = 1.0
 
+    for name, site in zip(FINGER_SENSORS, ("rightEndEffector", "leftEndEffector"), strict=True):
+        spec.add_sensor(name=name, type=mujoco.mjtSensor.mjSENS_FRAMEPOS, objtype=mujoco.mjtObj.mjOBJ_SITE, objname=site)
     target = spec.worldbody.add_body(name="target", mocap=True, pos=list(FIXED_TARGET))
     target.add_geom(
         name="target",

@@ -120,12 +120,14 @@ EXPLANATIONS: tuple[Explanation, ...] = (
     Explanation(
         "*/sawyer*",
         "ebm",
-        "Our EBM's plans claim the target while the real finger drifts away: the finger xyz are state dims of their "
-        "own, the planner moves them to the target in plans whose joint dims do not put the finger there, and the "
-        "inverse dynamics follows the joint dims (`python scripts/sawyer_plan_gap.py <model.zip>`, docs/agent.md "
-        "'Status'). The original's arm settings and its ramped goal did not change that (the probes are in "
-        "docs/agent.md). Our Sawyer is not the authors' arm but a torque-driven build of Metaworld's Sawyer "
-        "(docs/mujoco_envs.md), so its scores compare with the paper's only in scale.",
+        "Our EBM's plans put their finger dims where their joint dims do not put the finger (0.5-0.9 m apart): the "
+        "finger xyz are state dims of their own. Our ground-truth inverse dynamics therefore matches the planned "
+        "finger as well as the joints, weighted 100 to 1 (SawyerReachEnv.inverse_finger_weight, docs/mujoco_envs.md); "
+        "with the joints alone, as before 2026-12-02, the real finger drifted away from the target "
+        "(`python scripts/sawyer_plan_gap.py <model.zip> --finger-weight 0`, docs/agent.md 'Status'). The original's "
+        "sampling optimiser scored all 20 observation dims with equal weights. Our Sawyer is not the authors' arm but "
+        "a torque-driven build of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's "
+        "only in scale.",
     ),
     Explanation(
         "sawyer_ppo/*",

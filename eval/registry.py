@@ -121,11 +121,48 @@ def _config_defaults(config: type) -> dict[str, Any]:
     return values
 
 
-def _class_defaults_of(module: str, class_name: str) -> Callable[[str], dict[str, Any]]:
+def _class_defaults_of(module: str, class_name: str, env_inverse_dynamics: bool = False) -> Callable[[str], dict[str, Any]]:
     def defaults(env_id: str) -> dict[str, Any]:
-        return class_defaults(getattr(importlib.import_module(module), class_name))
+        settings = class_defaults(getattr(importlib.import_module(module), class_name))
+        if env_inverse_dynamics:
+            changed = env_inverse_dynamics_defaults(env_id)
+            if changed:  # only then: the digests of runs on other envs stay as they were
+                settings["env:inverse_dynamics"] = changed
+        return settings
 
     return defaults
+
+
+def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
+    """The env's constructor defaults that change only its ``inverse_dynamics``, where they differ from the value
+    that reproduces earlier runs.
+
+    An env class lists them as ``inverse_dynamics_arguments = {name: value that changes nothing}``; agents that use the
+    env's ground-truth inverse dynamics (the EBM) add the differing ones to their defaults digest, so that changing
+    such a default retires their runs on that env and leaves every other agent's runs (which never call it) valid.
+
+    :param env_id: a registered Gymnasium id.
+    :return: ``{argument: default}`` (empty for an unknown id or an env without such arguments).
+    """
+    import gymnasium as gym
+
+    try:
+        entry_point = gym.spec(env_id).entry_point
+    except gym.error.Error:
+        return {}
+    if not isinstance(entry_point, str):
+        return {}
+    module_name, _, attribute = entry_point.partition(":")
+    env_class = getattr(importlib.import_module(module_name), attribute, None)
+    arguments = getattr(env_class, "inverse_dynamics_arguments", {})
+    if env_class is None or not arguments:
+        return {}
+    parameters = inspect.signature(env_class).parameters
+    return {
+        name: _plain_default(parameters[name].default)
+        for name, neutral in arguments.items()
+        if name in parameters and parameters[name].default != neutral
+    }
 
 
 def ppo_defaults(env_id: str) -> dict[str, Any]:
@@ -241,7 +278,7 @@ AGENTS: dict[str, AgentSpec] = {
         make_ebm,
         "EBM",
         description="energy-based planner (the agent under test)",
-        defaults=_class_defaults_of("ebm_agent.agent", "EBMPlannerAgent"),
+        defaults=_class_defaults_of("ebm_agent.agent", "EBMPlannerAgent", env_inverse_dynamics=True),
     ),
     "ppo": AgentSpec(
         make_ppo_agent,
@@ -298,6 +335,7 @@ __all__ = [
     "AgentFactory",
     "AgentSpec",
     "class_defaults",
+    "env_inverse_dynamics_defaults",
     "get_agent",
     "ppo_defaults",
     "register_agent",

@@ -13,7 +13,17 @@ from scipy.optimize import least_squares
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import envs  # noqa: F401  (registers the ebm/ ids)
-from envs.sawyer import FIXED_TARGET, RESET_QPOS, TARGET_HIGH, TARGET_LOW, TORQUE_LIMITS, SawyerReachEnv, sawyer_model
+from envs.mujoco_inverse import FrameSkipInverseDynamics
+from envs.sawyer import (
+    FIXED_TARGET,
+    INVERSE_FINGER_WEIGHT,
+    RESET_QPOS,
+    TARGET_HIGH,
+    TARGET_LOW,
+    TORQUE_LIMITS,
+    SawyerReachEnv,
+    sawyer_model,
+)
 
 GOAL_MODES = ["fixed", "variable", None]
 
@@ -156,6 +166,11 @@ def test_bad_input_raises_clear_errors():
         SawyerReachEnv(goal="moving")
     with pytest.raises(ValueError, match="success_threshold"):
         SawyerReachEnv(success_threshold=0.0)
+    for weight in (-1.0, float("nan")):
+        with pytest.raises(ValueError, match="inverse_finger_weight"):
+            SawyerReachEnv(inverse_finger_weight=weight)
+    with pytest.raises(ValueError, match="needs a model with sensors"):
+        FrameSkipInverseDynamics(mujoco.MjModel.from_xml_string(_ONE_MOTOR), 2, end_sensors=True)
     env = SawyerReachEnv()
     env.reset(seed=0)
     with pytest.raises(ValueError, match="3 finite"):
@@ -169,9 +184,14 @@ def test_bad_input_raises_clear_errors():
     assert env.inverse_dynamics(np.zeros((0, 20)), np.zeros((0, 20))).shape == (0, 7)
 
 
+_ONE_MOTOR = """<mujoco><worldbody><body><joint name='j' type='hinge'/><geom size='0.1' mass='1'/></body></worldbody>
+<actuator><motor joint='j'/></actuator></mujoco>"""
+
+
+@pytest.mark.parametrize("finger_weight", [0.0, INVERSE_FINGER_WEIGHT])
 @pytest.mark.parametrize("policy", ["exploration", "small_uniform"])
-def test_inverse_dynamics_recovers_actions_and_reproduces_next_states(policy):
-    env = SawyerReachEnv(goal="variable")
+def test_inverse_dynamics_recovers_actions_and_reproduces_next_states(policy, finger_weight):
+    env = SawyerReachEnv(goal="variable", inverse_finger_weight=finger_weight)
     rng = np.random.default_rng(0)
     states, next_states, actions = [], [], []
     for episode in range(2):
@@ -197,6 +217,30 @@ def test_inverse_dynamics_recovers_actions_and_reproduces_next_states(policy):
         obs, *_ = env.step(recovered[index])
         np.testing.assert_allclose(obs["observation"][:14], next_states[index, :14], atol=1e-6)
     assert env.inverse_dynamics(states[0], next_states[0]).shape == (7,)
+
+
+def test_finger_sensors_read_the_finger():
+    env = SawyerReachEnv()
+    obs, _ = env.reset(seed=0)
+    for _ in range(20):
+        obs, *_ = env.step(env.sample_exploration_action())
+    sensors = env.data.sensordata  # [6]: right pad xyz, left pad xyz
+    np.testing.assert_allclose(0.5 * (sensors[:3] + sensors[3:6]), obs["achieved_goal"], atol=1e-12)
+
+
+def test_finger_weight_follows_a_plan_whose_finger_dims_disagree_with_its_joints():
+    """A planned step that moves only the finger dims (joints held): the weighted fit moves the real finger that way."""
+    moved = {}
+    for weight in (0.0, INVERSE_FINGER_WEIGHT):
+        env = SawyerReachEnv(inverse_finger_weight=weight)
+        obs, _ = env.reset(seed=0)
+        state = obs["observation"]
+        wanted = state.copy()
+        wanted[14] += 0.01  # the finger 1 cm along x, the joints where they are
+        obs, *_ = env.step(env.inverse_dynamics(state, wanted))
+        moved[weight] = obs["achieved_goal"][0] - state[14]
+    assert abs(moved[0.0]) < 1e-3  # joints only: hold still
+    assert moved[INVERSE_FINGER_WEIGHT] > 2e-3  # the finger goes where the plan puts it
 
 
 def test_exploration_actions_stay_off_the_joint_limits():

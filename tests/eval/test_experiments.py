@@ -401,6 +401,22 @@ def test_fields_added_at_their_neutral_value_leave_the_defaults_digest_alone():
     assert _ToyConfigLater().damping == 0.0 and _ToyConfigChanged().damping == 0.5
 
 
+def test_env_inverse_dynamics_defaults_retire_only_the_runs_that_use_them():
+    """SawyerReach's finger weight changes only its inverse dynamics: the EBM's digest there sees it, no other."""
+    from eval.provenance import agent_defaults_digest
+    from eval.registry import env_inverse_dynamics_defaults
+
+    assert env_inverse_dynamics_defaults("ebm/SawyerReach-v0") == {"inverse_finger_weight": 100.0}
+    assert env_inverse_dynamics_defaults("ebm/Particle-v0") == {}
+    assert env_inverse_dynamics_defaults("no/SuchEnv-v0") == {}
+    ebm = AGENTS["ebm"].defaults
+    assert ebm is not None
+    assert ebm("ebm/SawyerReach-v0")["env:inverse_dynamics"] == {"inverse_finger_weight": 100.0}
+    assert "env:inverse_dynamics" not in ebm("ebm/Particle-v0")  # other envs keep their digests
+    assert agent_defaults_digest("ebm", "ebm/SawyerReach-v0") != agent_defaults_digest("ebm", "ebm/Particle-v0")
+    assert agent_defaults_digest("action-ff", "ebm/SawyerReach-v0") == agent_defaults_digest("action-ff", "ebm/Particle-v0")
+
+
 def test_runs_made_with_other_library_defaults_are_retired(tmp_path, monkeypatch):
     """A changed default of the EBM changes its digest: its runs made before are rerun, the others stay."""
     import eval.provenance as provenance
