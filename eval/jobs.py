@@ -293,6 +293,26 @@ def _take_run_lock(run_dir: Path) -> Path:
     raise RuntimeError(f"could not claim {run_dir} ({lock} keeps reappearing)")
 
 
+def run_in_progress(run_dir: Path) -> bool:
+    """Whether a live process (on this host, or any process on another host) holds the run folder's lock.
+
+    :param run_dir: the folder.
+    :return: True while someone trains in it; False with no lock or a stale one.
+    """
+    import socket
+
+    lock = Path(run_dir) / RUN_LOCK
+    try:
+        held = json.loads(lock.read_text())
+    except FileNotFoundError:
+        return False
+    except (OSError, ValueError):
+        return True  # being written: its holder has just claimed it
+    if held.get("host") != socket.gethostname():
+        return True
+    return _alive(int(held.get("pid", -1)))
+
+
 def _alive(pid: int) -> bool:
     import os
 

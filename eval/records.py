@@ -65,7 +65,8 @@ class RecordsSummary:
 
     :param runs: run folders copied (relative to the results folder).
     :param figures: figure folders copied.
-    :param kept: folders left alone because the destination holds a finished one of its own (restore only).
+    :param kept: folders left alone because the destination holds a finished one of its own, or a run in progress
+        (restore only).
     :param seeds: finished seeds of unfinished figures copied (``<figure folder>/seeds/<file>``).
     """
 
@@ -278,9 +279,12 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
     summary = RecordsSummary()
     if not records_dir.is_dir():
         return summary
+    from eval.jobs import run_in_progress
+
     for relative in finished_runs(records_dir):
         target = out_dir / relative
-        if _is_finished(target):
+        # A folder another process trains in (it may be replacing a retired record) is left to that process.
+        if _is_finished(target) or run_in_progress(target):
             summary.kept.append(relative.as_posix())
             continue
         for name in ("model.zip", "error.txt"):  # leftovers of an unfinished run would contradict the record

@@ -84,6 +84,30 @@ def test_restore_keeps_a_finished_run_of_its_own_and_sessions_merge_once(tmp_pat
     assert commands == ["first", "second"]
 
 
+def test_restore_leaves_a_run_in_progress_alone(tmp_path):
+    """A process retraining a retired record holds its folder; a second process's restore must not refill it."""
+    import os
+    import socket
+
+    out, records = tmp_path / "runs", tmp_path / "records"
+    _, ebm = particle_online(out)
+    finish(ebm.jobs[0], -5.0)
+    finish(ebm.jobs[1], -6.0)
+    save_records(out, records)
+    for job in ebm.jobs[:2]:  # retired and being retrained: moved aside, the new run has begun
+        job.run_dir.rename(job.run_dir.with_name(job.run_dir.name + ".replaced-0123"))
+        job.run_dir.mkdir()
+        (job.run_dir / "model.zip").write_bytes(b"checkpoint in progress")
+    live = {"host": socket.gethostname(), "pid": os.getpid()}
+    (ebm.jobs[0].run_dir / ".running").write_text(json.dumps(live))
+    (ebm.jobs[1].run_dir / ".running").write_text(json.dumps({**live, "pid": 2**22 + 12345}))  # its process is gone
+    summary = restore_records(records, out)
+    assert summary.kept == [ebm.jobs[0].run_dir.relative_to(out).as_posix()]
+    assert summary.runs == [ebm.jobs[1].run_dir.relative_to(out).as_posix()]  # a stale lock protects nothing
+    assert sorted(p.name for p in ebm.jobs[0].run_dir.iterdir()) == [".running", "model.zip"]
+    assert (ebm.jobs[0].run_dir / "model.zip").read_bytes() == b"checkpoint in progress"
+
+
 def test_figures_are_recorded_with_their_images_only(tmp_path):
     out, records = tmp_path / "runs", tmp_path / "records"
     folder = out / "figures" / "obstacle"
