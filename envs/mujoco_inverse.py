@@ -41,6 +41,9 @@ class FrameSkipInverseDynamics:
     :param damping: Levenberg-Marquardt damping added to ``J^T J`` (keeps unreachable targets well posed).
     :param tolerance: residual norm (state units) at which a sample counts as solved.
     :param rescue_tolerance: residual norm above which a sample gets the multi-start rescue (``None``: never).
+    :param rescue_ceiling: residual norm above which a sample is taken as unreachable and gets no rescue (``None``:
+        no ceiling). The rescue gets past a jump of the control -> state map beside a reachable target; for a target
+        far out of reach (a planned state no control gives) Gauss-Newton's least-squares answer is kept.
     :param scan_points: values per control dim in the rescue's coordinate scan (0: no scan).
     :param rescue_starts: random candidate controls per stalled sample in the rescue.
     :param rescue_keep: candidates per stalled sample that the rescue refines.
@@ -56,6 +59,7 @@ class FrameSkipInverseDynamics:
         damping: float = 1e-12,
         tolerance: float = 1e-9,
         rescue_tolerance: float | None = 1e-5,
+        rescue_ceiling: float | None = None,
         scan_points: int = 41,
         rescue_starts: int = 128,
         rescue_keep: int = 8,
@@ -80,6 +84,7 @@ class FrameSkipInverseDynamics:
         self.damping = float(damping)
         self.tolerance = float(tolerance)
         self.rescue_tolerance = rescue_tolerance
+        self.rescue_ceiling = rescue_ceiling
         self.scan_points = int(scan_points)
         self.rescue_starts = int(rescue_starts)
         self.rescue_keep = int(rescue_keep)
@@ -126,7 +131,10 @@ class FrameSkipInverseDynamics:
 
         # Joint limits and contacts that engage inside a step put jumps in the control -> state map, and
         # Gauss-Newton can stall beside one; those samples get a multi-start second try.
-        stalled = np.flatnonzero(cost > self.rescue_tolerance**2)
+        stuck = cost > self.rescue_tolerance**2
+        if self.rescue_ceiling is not None:
+            stuck &= cost <= self.rescue_ceiling**2
+        stalled = np.flatnonzero(stuck)
         if stalled.size:
             rescued, rescued_cost = self._rescue(start[stalled], ctrl[stalled], targets[stalled], residual)
             better = rescued_cost < cost[stalled]

@@ -169,6 +169,8 @@ def test_bad_input_raises_clear_errors():
     for weight in (-1.0, float("nan")):
         with pytest.raises(ValueError, match="inverse_finger_weight"):
             SawyerReachEnv(inverse_finger_weight=weight)
+    with pytest.raises(ValueError, match="inverse_rescue_ceiling"):
+        SawyerReachEnv(inverse_rescue_ceiling=0.0)
     with pytest.raises(ValueError, match="needs a model with sensors"):
         FrameSkipInverseDynamics(mujoco.MjModel.from_xml_string(_ONE_MOTOR), 2, end_sensors=True)
     env = SawyerReachEnv()
@@ -241,6 +243,27 @@ def test_finger_weight_follows_a_plan_whose_finger_dims_disagree_with_its_joints
         moved[weight] = obs["achieved_goal"][0] - state[14]
     assert abs(moved[0.0]) < 1e-3  # joints only: hold still
     assert moved[INVERSE_FINGER_WEIGHT] > 2e-3  # the finger goes where the plan puts it
+
+
+def test_a_wanted_state_far_out_of_reach_gets_no_rescue(monkeypatch):
+    """Above the ceiling Gauss-Newton's answer is kept; without a ceiling the same sample gets the multi-start."""
+    rescued = []
+    original = FrameSkipInverseDynamics._rescue
+
+    def counting(self, start, *args):
+        rescued.append(len(start))
+        return original(self, start, *args)
+
+    monkeypatch.setattr(FrameSkipInverseDynamics, "_rescue", counting)
+    actions = {}
+    for ceiling in (None, 0.1):
+        env = SawyerReachEnv(inverse_rescue_ceiling=ceiling)
+        obs, _ = env.reset(seed=0)
+        wanted = obs["observation"].copy()
+        wanted[:7] += 2.0  # every joint 2 rad further in one 12.5 ms step: no torque does that
+        actions[ceiling] = env.inverse_dynamics(obs["observation"], wanted)
+    assert rescued == [1]  # only the solver without a ceiling tried
+    assert np.all(np.abs(actions[0.1]) <= 1.0)
 
 
 def test_exploration_actions_stay_off_the_joint_limits():

@@ -406,12 +406,13 @@ def test_env_inverse_dynamics_defaults_retire_only_the_runs_that_use_them():
     from eval.provenance import agent_defaults_digest
     from eval.registry import env_inverse_dynamics_defaults
 
-    assert env_inverse_dynamics_defaults("ebm/SawyerReach-v0") == {"inverse_finger_weight": 100.0}
+    sawyer = {"inverse_finger_weight": 100.0, "inverse_rescue_ceiling": 0.1}
+    assert env_inverse_dynamics_defaults("ebm/SawyerReach-v0") == sawyer
     assert env_inverse_dynamics_defaults("ebm/Particle-v0") == {}
     assert env_inverse_dynamics_defaults("no/SuchEnv-v0") == {}
     ebm = AGENTS["ebm"].defaults
     assert ebm is not None
-    assert ebm("ebm/SawyerReach-v0")["env:inverse_dynamics"] == {"inverse_finger_weight": 100.0}
+    assert ebm("ebm/SawyerReach-v0")["env:inverse_dynamics"] == sawyer
     assert "env:inverse_dynamics" not in ebm("ebm/Particle-v0")  # other envs keep their digests
     assert agent_defaults_digest("ebm", "ebm/SawyerReach-v0") != agent_defaults_digest("ebm", "ebm/Particle-v0")
     assert agent_defaults_digest("action-ff", "ebm/SawyerReach-v0") == agent_defaults_digest("action-ff", "ebm/Particle-v0")
