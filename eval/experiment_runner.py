@@ -340,7 +340,8 @@ def run_experiments(
 
     With ``settings["records"]`` (``docs/records`` for the published document) the recorded runs are restored into
     the results folder first (so they are skipped and reported) and every finished run is recorded after
-    (``eval.records``).
+    (``eval.records``); the document then reports the protocol's seeds whatever ``--seeds`` ran (``--report-only
+    --seeds`` still reports those seeds).
 
     :param settings: from ``eval.cli.resolve_experiment_settings``.
     :param parts: from ``selected_parts``.
@@ -362,7 +363,10 @@ def run_experiments(
     if records:
         _stderr(restore_records(Path(records), out).describe("restored", Path(records), out))
     summary = run_parts(parts, executor, command, progress=progress) if parts else RunSummary()
-    path = write_results(out, Path(settings["docs"]), settings["scale"], settings["seeds"], records=records)
+    # The published document (the one kept with records) reports the protocol's seeds: ``--seeds`` on a run only
+    # splits the work, and must not turn the figures of other seed sets into "not run yet".
+    seeds = None if (records and not settings["report_only"]) else settings["seeds"]
+    path = write_results(out, Path(settings["docs"]), settings["scale"], seeds, records=records)
     if records:  # after the document, so that the anchors it computed are kept too
         _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
     print(f"Results document: {path} (from {settings['out']}/)")

@@ -204,3 +204,19 @@ def test_a_started_figure_without_a_finished_seed_is_not_recorded(tmp_path):
     (tmp_path / "out" / "figures" / "energy_maps" / FIGURE_STARTED).write_text("{}")
     assert save_records(tmp_path / "out", tmp_path / "records").seeds == []
     assert not (tmp_path / "records" / "figures" / "energy_maps").exists()
+
+
+def test_a_run_with_seeds_still_publishes_the_protocol_seeds(tmp_path, monkeypatch):
+    """``--seeds 0`` splits the work; the published document (with records) keeps reporting every seed."""
+    import eval.results_doc as results_doc
+    from eval.executors import LocalExecutor
+    from eval.experiment_runner import run_experiments
+
+    written = []
+    monkeypatch.setattr(results_doc, "write_results", lambda out, docs, scale, seeds, records=None: written.append(seeds))
+    base = {"experiments": ["table1"], "out": str(tmp_path / "runs"), "docs": str(tmp_path / "results.md")}
+    base.update(scale="paper", seeds=[0], device="cpu")
+    for records, report_only in ((str(tmp_path / "records"), False), (str(tmp_path / "records"), True), (None, False)):
+        settings = {**base, "records": records, "report_only": report_only}
+        assert run_experiments(settings, [], LocalExecutor(), "ebm-eval", progress=False) == 0
+    assert written == [None, [0], [0]]
