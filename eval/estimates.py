@@ -16,12 +16,13 @@ from pathlib import Path
 from eval.jobs import Job
 from eval.parts import Part
 
-SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.135}
+SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.053}
 """Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting, in one of two processes
 on 2 cores (``--jobs 2``): the Table 1 online runs in docs/records took 0.015-0.027 s per transition on the particle,
-0.013-0.030 on the maze, about 0.037 on Reacher (2026-11-22 and 2026-12-01). The Sawyer's is its measured acting cost
-times ``ACTING_SHARE``: the pretrained EBM's 10,000 evaluation steps took 437-467 s (2026-12-02, two processes on 2
-cores), 0.045 s a step; it was a guess of 0.08 before. ``ebm-eval --experiment list`` prints measured times beside the
+0.013-0.030 on the maze, about 0.037 on Reacher (2026-11-22 and 2026-12-01). The Sawyer's is from its online
+fixed-goal EBM (seed 0, 2026-12-02, two or three processes on 2 cores): 3,778 s for 50,000 learning steps and 60,000
+evaluation steps, i.e. 50,000 p + 60,000 p / ``ACTING_SHARE``; it was 0.135 before the Sawyer's inverse dynamics got
+its rescue ceiling (docs/mujoco_envs.md). ``ebm-eval --experiment list`` prints measured times beside the
 estimates once runs exist."""
 
 ACTING_SHARE = 3.0
@@ -45,7 +46,7 @@ FIGURE_SECONDS_PER_SEED = {
     "plan_diversity": 400.0,
     "reacher_directions": 600.0,
     "maze_exploration": 950.0,
-    "sawyer_exploration": 7000.0,
+    "sawyer_exploration": 3000.0,
     "energy_maps": 1000.0,
 }
 """Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents). plan_diversity,
@@ -53,7 +54,7 @@ reacher_directions, maze_exploration and energy_maps from their recorded wall ti
 energy maps: 48 min for 3 seeds, each an online EBM on the particle and a goal-free one on the maze). The others from
 what they train: obstacle_generalisation an EBM and an Action FF online for 50,000 particle transitions each (the
 Table 1 particle online runs took 1,000-1,400 s each), sawyer_exploration an online EBM on the Sawyer (50,000
-transitions at ``SECONDS_PER_STEP``) and 250,000 random steps. The earlier guess of 900 s for obstacle_generalisation
+transitions at ``SECONDS_PER_STEP``, 2,650 s) and 250,000 random steps. The earlier guess of 900 s for obstacle_generalisation
 was 3x low."""
 
 

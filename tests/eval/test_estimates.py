@@ -76,6 +76,6 @@ def test_the_listing_names_unfinished_runs_that_kept_a_checkpoint(tmp_path):
 def test_the_action_ff_sawyer_run_is_priced_without_the_inverse_dynamics(tmp_path):
     part = _part(tmp_path, "table2/sawyer/online_fixed")
     by_agent = {job.agent: estimate_job_seconds(job) for job in part.jobs if job.seed == 0}
-    # Measured 2026-12-02: about 21 min for the Action FF's run, about 2.5 h for the EBM's.
+    # Measured 2026-12-02: about 21 min for the Action FF's run, 63 min for the EBM's (with the rescue ceiling).
     assert 15 * 60 < by_agent["action-ff"] < 30 * 60
-    assert by_agent["ebm"] > 5 * by_agent["action-ff"]
+    assert 45 * 60 < by_agent["ebm"] < 90 * 60
