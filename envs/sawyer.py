@@ -281,18 +281,20 @@ class SawyerReachEnv(gym.Env):
         if not (np.all(np.isfinite(states)) and np.all(np.isfinite(next_states))):
             raise ValueError("states and next_states must be finite (no NaN or inf).")
         single = states.ndim == 1
-        states, next_states = np.atleast_2d(states), np.atleast_2d(next_states)
-        actions, _ = self._inverse.solve(
-            states[:, :7],
-            10.0 * states[:, 7:14],
-            10.0 * next_states[:, 7:14],
-            next_states[:, :17],
-            functools.partial(_joint_finger_residual, weight=self.inverse_finger_weight)
-            if self.inverse_finger_weight > 0
-            else _joint_residual,
-        )
+        actions, _ = self._solve_inverse(np.atleast_2d(states), np.atleast_2d(next_states))
         actions = actions.astype(self.action_space.dtype)
         return actions[0] if single else actions
+
+    def _solve_inverse(self, states: np.ndarray, next_states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The solver's answer for checked [B, 20] float64 states: controls [B, 7] and squared residual norms [B]."""
+        residual = (
+            functools.partial(_joint_finger_residual, weight=self.inverse_finger_weight)
+            if self.inverse_finger_weight > 0
+            else _joint_residual
+        )
+        return self._inverse.solve(
+            states[:, :7], 10.0 * states[:, 7:14], 10.0 * next_states[:, 7:14], next_states[:, :17], residual
+        )
 
     # --------------------------------------------------------------------------------------------------- internals
     def _finger(self) -> np.ndarray:

@@ -279,13 +279,13 @@ def _take_run_lock(run_dir: Path) -> Path:
                 handle.write(json.dumps(mine))
             return lock
         except FileExistsError:
+            if not run_in_progress(run_dir):
+                lock.unlink(missing_ok=True)  # stale: its process is gone
+                continue
             try:
                 held = json.loads(lock.read_text())
             except (OSError, ValueError):
                 held = {}
-            if held.get("host") == mine["host"] and not _alive(int(held.get("pid", -1))):
-                lock.unlink(missing_ok=True)  # stale: its process is gone
-                continue
             raise RuntimeError(
                 f"{run_dir} is being trained by process {held.get('pid')} on {held.get('host')}: two processes must not "
                 f"share a run folder. Wait for it, or, if no such process runs any more, delete {lock}."

@@ -77,16 +77,13 @@ def compare(states: np.ndarray, wanted: np.ndarray, actions: np.ndarray | None =
     costs, recovered = {}, {}
     for label, ceiling in (("no_rescue", None), ("all", None), ("ceiling", INVERSE_RESCUE_CEILING)):
         env = SawyerReachEnv(inverse_rescue_ceiling=ceiling)
-        solver = env._inverse
         if label == "no_rescue":
-            solver.rescue_tolerance = None
+            env._inverse.rescue_tolerance = None
         began = time.perf_counter()
-        recovered[label] = env.inverse_dynamics(states, wanted)
+        recovered[label], costs[label] = env._solve_inverse(states.astype(np.float64), wanted.astype(np.float64))
         elapsed = time.perf_counter() - began
         if label != "no_rescue":
             out[f"ms_{label}"] = 1000.0 * elapsed / len(states)
-        # The squared residual of each answer, from the solver's own residual (one rollout per sample).
-        costs[label] = _squared_residuals(env, states, wanted, recovered[label])
     tolerance = SawyerReachEnv()._inverse.rescue_tolerance
     assert tolerance is not None
     stalled = costs["no_rescue"] > tolerance**2
@@ -102,22 +99,6 @@ def compare(states: np.ndarray, wanted: np.ndarray, actions: np.ndarray | None =
         out["error_all"] = float(np.abs(recovered["all"] - actions).max())
         out["error_ceiling"] = float(np.abs(recovered["ceiling"] - actions).max())
     return out
-
-
-def _squared_residuals(env: SawyerReachEnv, states: np.ndarray, wanted: np.ndarray, actions: np.ndarray) -> np.ndarray:
-    """[B] squared residual of stepping each state with its action, as the inverse dynamics weighs it."""
-    import functools
-
-    from envs.sawyer import _joint_finger_residual
-
-    solver = env._inverse
-    start = np.tile(solver._template_state, (len(states), 1))
-    start[:, 0] = 0.0
-    start[:, solver._qpos_slice] = states[:, :7]
-    start[:, solver._qvel_slice] = 10.0 * states[:, 7:14]
-    residual = functools.partial(_joint_finger_residual, weight=env.inverse_finger_weight)
-    values = solver._residual_of(start, actions.astype(np.float64)[:, None, :], wanted[:, None, :17], residual)
-    return np.sum(values[:, 0, :] ** 2, axis=-1)
 
 
 def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:

@@ -26,3 +26,18 @@ def _load_script(name: str) -> ModuleType:
 def load_script():
     """The loader of ``scripts/<name>.py`` modules: ``load_script("probe")``."""
     return _load_script
+
+
+@pytest.fixture
+def untrained_sawyer_model(tmp_path) -> Path:
+    """A saved, untrained EBM on ``ebm/SawyerReach-v0`` with a tiny planner (8 samples, 2 iterations)."""
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the ebm/ ids)
+    from ebm_agent import EBMPlannerAgent
+
+    env = gym.make("ebm/SawyerReach-v0")
+    agent = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu", planner_config={"num_samples": 8, "iterations": 2})
+    path = tmp_path / "sawyer.zip"
+    agent.save(path)
+    return path
