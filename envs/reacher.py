@@ -28,6 +28,13 @@ DEFAULT_GOAL = (0.7, 0.5)
 _RESCUE_COST = 1e-12
 """Squared residual above which an inverse-dynamics fit counts as poor."""
 
+INVERSE_ANGLE_WEIGHT = 1.0
+"""Weight of the angle dims against the velocity dims (both normalised) in ``ReacherEnv.inverse_dynamics``'s fit.
+
+One env step of full torque moves a normalised angle by about 0.0126 and a velocity / 10 by about 0.40, so with equal
+weights a wanted state that the torques cannot reach is fitted almost entirely on its velocity dims: a plan that moves
+the angles towards the goal without the matching velocities yields torques near 0 (``scripts/reacher_plan_gap.py``)."""
+
 _LINK_LENGTHS = (0.1, 0.11)  # shoulder-to-elbow and elbow-to-fingertip (Reacher-v4 XML).
 
 
@@ -37,6 +44,8 @@ class ReacherEnv(gym.Env):
     :param goal: the goal (th1_hat, th2_hat) in [-1, 1]^2; ``None`` draws a new reachable goal at every reset.
     :param success_threshold: wrapped-L1 distance below which the episode counts as a success.
     :param terminate_on_success: end the episode on success (the original wrapper's ``done``).
+    :param inverse_angle_weight: weight of the angle dims against the velocity dims in ``inverse_dynamics``; see
+        ``INVERSE_ANGLE_WEIGHT``. Reachable transitions are recovered exactly with any weight.
     :param render_mode: ``None`` or ``"rgb_array"``.
     :param width: render width in pixels.
     :param height: render height in pixels.
@@ -48,11 +57,16 @@ class ReacherEnv(gym.Env):
     frame_skip: int = 2
     """Physics steps per env step (Reacher-v4)."""
 
+    inverse_dynamics_arguments: ClassVar[dict[str, Any]] = {"inverse_angle_weight": 1.0}
+    """Constructor arguments that change only ``inverse_dynamics``, each with the value that reproduces runs made
+    before it existed (``eval.registry.env_inverse_dynamics_defaults``)."""
+
     def __init__(
         self,
         goal: tuple[float, float] | np.ndarray | None = DEFAULT_GOAL,
         success_threshold: float = 0.01,
         terminate_on_success: bool = True,
+        inverse_angle_weight: float = INVERSE_ANGLE_WEIGHT,
         render_mode: str | None = None,
         width: int = 480,
         height: int = 480,
@@ -61,6 +75,9 @@ class ReacherEnv(gym.Env):
             raise ValueError(f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}.")
         if success_threshold <= 0:
             raise ValueError(f"success_threshold must be > 0, got {success_threshold}.")
+        if not (np.isfinite(inverse_angle_weight) and inverse_angle_weight > 0):
+            raise ValueError(f"inverse_angle_weight must be finite and > 0, got {inverse_angle_weight}.")
+        self.inverse_angle_weight = float(inverse_angle_weight)
         self.fixed_goal = None if goal is None else _validate_goal(goal)
         self.success_threshold = float(success_threshold)
         self.terminate_on_success = bool(terminate_on_success)
@@ -195,7 +212,7 @@ class ReacherEnv(gym.Env):
 
         Starts from ``mj_inverse`` with the mean acceleration of the step and refines it on the simulator (see
         ``envs.mujoco_inverse``): exact to ~1e-6 for reachable transitions; otherwise the in-bounds action whose
-        outcome is closest to ``next_states`` (wrapped angles and velocities / 10, equally weighted).
+        outcome is closest to ``next_states`` (wrapped angles weighted by ``inverse_angle_weight``, velocities / 10).
 
         :param states: [B, 4] (or [4]) normalised states.
         :param next_states: [B, 4] (or [4]) wanted next states.
@@ -204,7 +221,8 @@ class ReacherEnv(gym.Env):
         states, next_states, single = _check_state_pair(states, next_states, 4)
         qpos, qvel = state_to_physics(states)
         _, next_qvel = state_to_physics(next_states)
-        actions, cost = self._inverse.solve(qpos, qvel, next_qvel, next_states, _reacher_residual)
+        residual = functools.partial(_reacher_residual, angle_weight=self.inverse_angle_weight)
+        actions, cost = self._inverse.solve(qpos, qvel, next_qvel, next_states, residual)
         # The elbow can be pushed a little past its +-3 rad limit, and past +-pi the normalised angle cannot say on
         # which side of the limit it is; where the fit is poor, try the other side and keep the better fit.
         beyond = np.flatnonzero((np.abs(qpos[:, 1]) > self.model.jnt_range[1, 1]) & (cost > _RESCUE_COST))
@@ -212,7 +230,7 @@ class ReacherEnv(gym.Env):
             other_qpos = qpos[beyond].copy()
             other_qpos[:, 1] -= np.sign(other_qpos[:, 1]) * 2.0 * np.pi
             other_actions, other_cost = self._inverse.solve(
-                other_qpos, qvel[beyond], next_qvel[beyond], next_states[beyond], _reacher_residual
+                other_qpos, qvel[beyond], next_qvel[beyond], next_states[beyond], residual
             )
             better = other_cost < cost[beyond]
             actions[beyond[better]] = other_actions[better]
@@ -304,9 +322,12 @@ def state_to_physics(states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return qpos, qvel
 
 
-def _reacher_residual(qpos_end: np.ndarray, qvel_end: np.ndarray, targets: np.ndarray) -> np.ndarray:
-    """Mismatch [B, M, 4] of rolled-out end states with wanted states [B, 1, 4]: wrapped angles, velocities / 10."""
-    angle_error = wrap_difference(normalize_angle(qpos_end[..., :2]) - targets[..., :2])
+def _reacher_residual(
+    qpos_end: np.ndarray, qvel_end: np.ndarray, targets: np.ndarray, *, angle_weight: float = 1.0
+) -> np.ndarray:
+    """Mismatch [B, M, 4] of rolled-out end states with wanted states [B, 1, 4]: wrapped angles times
+    ``angle_weight``, velocities / 10."""
+    angle_error = angle_weight * wrap_difference(normalize_angle(qpos_end[..., :2]) - targets[..., :2])
     return np.concatenate([angle_error, qvel_end[..., :2] / 10.0 - targets[..., 2:]], axis=-1)
 
 

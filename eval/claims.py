@@ -28,6 +28,12 @@ import numpy as np
 
 from eval import stats
 
+LEARNING_CONTROL = (
+    "Control, not a claim of the paper: the online EBM beats the same agent untrained (what its planner and the env's "
+    "ground-truth inverse dynamics do with no learned energy)"
+)
+"""Where this fails, a win of the EBM over the other agents on that env is not a win of its learned energy."""
+
 HOLDS = "holds"
 INCONCLUSIVE = "inconclusive"
 FAILS = "does not hold"
@@ -105,6 +111,23 @@ SCORE_CLAIMS = (
     ),
 )
 """The claims decided by table cells."""
+
+CONTROL_CLAIMS = (
+    ScoreClaim(
+        LEARNING_CONTROL,
+        (
+            ("particle", ("table1/particle/online", "ebm", "online"), ("table1/particle/untrained", "ebm", "untrained")),
+            ("maze", ("table1/maze/online", "ebm", "online"), ("table1/maze/untrained", "ebm", "untrained")),
+            ("reacher", ("table1/reacher/online", "ebm", "online"), ("table1/reacher/untrained", "ebm", "untrained")),
+            (
+                "sawyer",
+                ("table2/sawyer/online_fixed", "ebm", "online fixed"),
+                ("table2/sawyer/untrained_fixed", "ebm", "untrained"),
+            ),
+        ),
+    ),
+)
+"""Controls judged after the paper's claims, the same way: not claims of the paper, but what they rest on."""
 
 
 @dataclass(frozen=True)
@@ -271,13 +294,7 @@ def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
     :param figures: metrics of a figure part.
     :return: the claims with their verdicts and evidence.
     """
-    claims = []
-    for spec in SCORE_CLAIMS:
-        comparisons = tuple(
-            compare_scores(label, _name(better), scores(better), _name(worse), scores(worse))
-            for label, better, worse in spec.comparisons
-        )
-        claims.append(Claim(spec.text, combine(comparisons), comparisons))
+    claims = [_score_claim(spec, scores) for spec in SCORE_CLAIMS]
     exploration = []
     for spec_ in EXPLORATION_FIGURES:
         label, part = spec_.label, spec_.part
@@ -292,11 +309,21 @@ def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
             verdict = HOLDS if ours > theirs else FAILS
             exploration.append(Comparison(label, verdict, f"{key} = {ours:.4g} vs {partner} = {theirs:.4g} ({part})"))
     claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
+    claims += [_score_claim(spec, scores) for spec in CONTROL_CLAIMS]
     return claims
 
 
+def _score_claim(spec: ScoreClaim, scores: ScoreLookup) -> Claim:
+    comparisons = tuple(
+        compare_scores(label, _name(better), scores(better), _name(worse), scores(worse))
+        for label, better, worse in spec.comparisons
+    )
+    return Claim(spec.text, combine(comparisons), comparisons)
+
+
 def _name(key: CellKey) -> str:
-    return AGENT_NAMES.get(key[1], key[1])
+    name = AGENT_NAMES.get(key[1], key[1])
+    return f"untrained {name}" if key[2] == "untrained" else name
 
 
 def render_claims(claims: Sequence[Claim]) -> str:
@@ -313,10 +340,12 @@ def render_claims(claims: Sequence[Claim]) -> str:
 
 
 __all__ = [
+    "CONTROL_CLAIMS",
     "EXPLORATION_CLAIM",
     "EXPLORATION_FIGURES",
     "FAILS",
     "HOLDS",
+    "LEARNING_CONTROL",
     "MISSING",
     "SCORE_CLAIMS",
     "SPREAD_STATISTICS",

@@ -91,7 +91,16 @@ def _table1(context: Context) -> list[Part]:
                 for agent in ("ebm", "action-ff")
             ]
             parts.append(table_part(context, "table1", f"table1/{env}/{data}", cells))
+        parts.append(untrained_part(context, "table1", f"table1/{env}/untrained", env))
     return parts
+
+
+def untrained_part(context: Context, experiment: str, name: str, env: str, env_kwargs: dict | None = None) -> Part:
+    """The EBM as built, evaluated without learning (no paper number): the control that says how much of a trained
+    EBM's score its planner and the env's ground-truth inverse dynamics give without any learned energy."""
+    variant = "untrained" + ("_variable_goal" if env_kwargs == VARIABLE_GOAL else "")
+    cell = make_cell(context, "untrained", env, "ebm", variant, mode="untrained", env_kwargs=env_kwargs)
+    return table_part(context, experiment, name, [cell])
 
 
 def sawyer_online_fixed(context: Context, agent: str, setting: str = "online fixed", paper: float | None = None) -> Cell:
@@ -116,6 +125,8 @@ def _table2(context: Context) -> list[Part]:
                 dataset = TABLE2_DATASETS[setting]
                 cells.append(make_cell(context, label, "sawyer", agent, setting, paper, mode="pretrained", dataset=dataset))
         parts.append(table_part(context, "table2", f"table2/sawyer/{setting}", cells))
+    parts.append(untrained_part(context, "table2", "table2/sawyer/untrained_fixed", "sawyer"))
+    parts.append(untrained_part(context, "table2", "table2/sawyer/untrained_variable", "sawyer", VARIABLE_GOAL))
     return parts
 
 
@@ -178,7 +189,9 @@ EXPERIMENTS: dict[str, Experiment] = {
             "paper Table 1, Sec. 4.2",
             "EBM vs Action FF, each pretrained on 100,000 random transitions of the env (10 epochs of shuffled "
             "batches of 256) or learning online (Algorithm 1) from 50,000 transitions; evaluated from the paper's "
-            "start and goal.",
+            "start and goal. The untrained rows (no paper number) are the EBM as built, evaluated without learning: "
+            "the control for how much of the EBM's score its planner and the env's ground-truth inverse dynamics "
+            "give with no learned energy.",
             _table1,
         ),
         Experiment(
@@ -189,7 +202,9 @@ EXPERIMENTS: dict[str, Experiment] = {
             "actions), on 100,000 directed transitions (the real transitions of an EBM learning online), on the "
             "directed transitions repeated 100 times in contiguous batches (directed + sequential), and online "
             "(50,000 transitions) with a fixed goal or a new goal per episode. Our Sawyer is a torque-driven "
-            "Metaworld arm, not the original's PR2-like model: compare against the anchors, not only the paper.",
+            "Metaworld arm, not the original's PR2-like model: compare against the anchors, not only the paper. "
+            "The untrained rows (no paper number) are the EBM as built, evaluated without learning on the fixed and "
+            "the variable goals.",
             _table2,
         ),
         Experiment(

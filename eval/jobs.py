@@ -4,8 +4,9 @@
 distributed task (a Ray executor) runs, and its ``JobResult`` carries only plain Python values back.
 
 A job learns either online (``mode="online"``: ``learn(total_timesteps)``, Algorithm 1 for the planners) or from
-a fixed dataset (``mode="pretrained"``: the paper's pretrained rows, Tables 1-2; see ``eval.pretraining``), then
-is evaluated the same way, so both write the same files.
+a fixed dataset (``mode="pretrained"``: the paper's pretrained rows, Tables 1-2; see ``eval.pretraining``), or not
+at all (``mode="untrained"``, budget 0: the agent as built, the control that says what its planner and inverse
+dynamics do before any learning), then is evaluated the same way, so all write the same files.
 
 Run folder ``<out>[/<variant>]/<env_short>/<agent>/seed_<k>/``:
 
@@ -42,7 +43,7 @@ if TYPE_CHECKING:  # SB3 loads only inside a run
 EVAL_SEED_OFFSET = 10_000
 """The evaluation env is seeded ``seed + EVAL_SEED_OFFSET`` so that it never replays the training env's episodes."""
 
-MODES = ("online", "pretrained")
+MODES = ("online", "pretrained", "untrained")
 """How a job learns: online interaction (``learn``) or a fixed dataset (``learn_offline``)."""
 
 DATASETS = ("random", "directed", "directed+sequential")
@@ -77,7 +78,8 @@ class Job:
     :param verbose: SB3 verbosity of the agent.
     :param progress_bar: show SB3's progress bar during ``learn`` (for in-process runs).
     :param mode: ``"online"`` (learn from ``timesteps`` transitions of interaction) or ``"pretrained"`` (learn
-        offline from a dataset of ``timesteps`` transitions, then evaluate; only agents with ``learn_offline``).
+        offline from a dataset of ``timesteps`` transitions, then evaluate; only agents with ``learn_offline``) or
+        ``"untrained"`` (evaluate the agent as built; ``timesteps`` must be 0).
     :param dataset: pretrained only: ``"random"``, ``"directed"`` or ``"directed+sequential"`` (``eval.pretraining``).
     :param offline_kwargs: pretrained only: ``epochs``, ``batch_size`` of ``learn_offline`` and ``repeat`` (copies
         of each transition in the sequential dataset); unset keys take ``eval.pretraining``'s defaults.
@@ -112,6 +114,8 @@ class Job:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f"Job.mode must be one of {MODES}, got {self.mode!r}")
+        if self.mode == "untrained" and self.timesteps != 0:
+            raise ValueError(f"Job.timesteps must be 0 for an untrained job (it learns nothing), got {self.timesteps}")
         if self.dataset not in DATASETS:
             raise ValueError(f"Job.dataset must be one of {DATASETS}, got {self.dataset!r}")
         if Path(self.variant).is_absolute() or ".." in Path(self.variant).parts:
@@ -366,6 +370,8 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
 
             pretraining = pretrain(model, job)
             timesteps, reused = int(pretraining["dataset_size"]), None
+        elif job.mode == "untrained":
+            timesteps, reused = 0, None
         else:
             timesteps, reused = _learn_online(model, job, eval_env, spec.callbacks, resume)
         learn_time = time.perf_counter() - learn_start + (resume.learn_time_s if resume is not None else 0.0)

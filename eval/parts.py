@@ -246,7 +246,7 @@ def make_cell(
     :param agent: agent name.
     :param variant: the configuration's folder name (runs of equal configurations must share it).
     :param paper: the paper's number.
-    :param mode: ``online`` or ``pretrained``.
+    :param mode: ``online``, ``pretrained`` or ``untrained`` (budget 0).
     :param dataset: pretrained only: the dataset.
     :param budget_multiple: online only: the budget as a multiple of the scale's online budget.
     :param env_kwargs: kwargs of the training and evaluation envs, over the scale's.
@@ -265,7 +265,7 @@ def make_cell(
         **(hyperparams or {}),
     }
     pretrained = mode == "pretrained"
-    budget = scale.pretrain if pretrained else scale.online * budget_multiple
+    budget = 0 if mode == "untrained" else scale.pretrain if pretrained else scale.online * budget_multiple
     offline = {}
     collector: dict[str, Any] = {}
     if pretrained:
@@ -278,7 +278,7 @@ def make_cell(
             agent=agent,
             seed=seed,
             timesteps=budget,
-            eval_freq=budget if pretrained else max(budget // scale.evaluations, 1),
+            eval_freq=max(budget if pretrained else budget // scale.evaluations, 1),
             eval_episodes=scale.eval_episodes,
             hyperparams=agent_kwargs,
             env_kwargs=train_kwargs,

@@ -3,9 +3,11 @@
 Usage:
     python scripts/probe.py table1/particle/pretrained action-ff residual=true --seeds 0 1 2
     python scripts/probe.py table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
+    python scripts/probe.py table1/reacher/pretrained ebm --env inverse_angle_weight=30 --seeds 0
 
 Runs the jobs of the cell (``ebm-eval --experiment <experiment> --part <part>``, agent ``AGENT``) with the given
-keyword arguments of the agent replaced (values in YAML, as ``ebm-eval --hyperparams``), into its own results folder
+keyword arguments of the agent replaced (values in YAML, as ``ebm-eval --hyperparams``) and ``--env KEY=VALUE``
+keyword arguments of the training and evaluation envs replaced, into its own results folder
 (``runs/probe/<part>/<agent>/<changes>``; nothing is mixed with ``runs/results``), and prints each seed's score of its
 deterministic evaluation episodes, their mean and std, and the wall time. A finished probe run is not rerun.
 """
@@ -20,7 +22,7 @@ import numpy as np
 import yaml
 
 from eval.experiments import build_parts, make_context, select_parts
-from eval.jobs import run_job
+from eval.jobs import Job, run_job
 from eval.provenance import completed_result
 
 
@@ -37,6 +39,19 @@ def parse_change(text: str) -> tuple[str, object]:
     return key, yaml.safe_load(value)
 
 
+def with_env_changes(job: Job, env_changes: dict[str, object]) -> Job:
+    """The job with ``env_changes`` merged into its training env's and evaluation envs' keyword arguments.
+
+    :param job: the cell's job.
+    :param env_changes: env keyword arguments to set.
+    :return: the changed job (``job`` itself when there are none).
+    """
+    if not env_changes:
+        return job
+    eval_env_kwargs = None if job.eval_env_kwargs is None else {**job.eval_env_kwargs, **env_changes}
+    return replace(job, env_kwargs={**job.env_kwargs, **env_changes}, eval_env_kwargs=eval_env_kwargs)
+
+
 def main(argv: list[str] | None = None) -> list[float]:
     """Run the probe.
 
@@ -47,13 +62,19 @@ def main(argv: list[str] | None = None) -> list[float]:
     parser.add_argument("part", help="a part of a paper experiment, e.g. table1/particle/pretrained")
     parser.add_argument("agent", help="the cell's agent: ebm or action-ff")
     parser.add_argument("changes", nargs="*", type=parse_change, help="KEY=VALUE agent keyword arguments")
+    parser.add_argument(
+        "--env", action="append", default=[], type=parse_change, metavar="KEY=VALUE", help="an env keyword argument"
+    )
     parser.add_argument("--seeds", nargs="+", type=int, default=[0])
     parser.add_argument("--episodes", type=int, help="deterministic evaluation episodes (default: the part's)")
     parser.add_argument("--out", default="runs/probe", help="root of the probe's results folders")
     parser.add_argument("--scale", default="paper", help="the experiment's scale: paper (default) or smoke")
     args = parser.parse_args(argv)
     changes = dict(args.changes)
-    label = "_".join(f"{key}-{value}" for key, value in changes.items()) or "unchanged"
+    env_changes = dict(args.env)
+    labels = [f"{key}-{value}" for key, value in changes.items()]
+    labels += [f"env.{key}-{value}" for key, value in env_changes.items()]
+    label = "_".join(labels) or "unchanged"
     out = f"{args.out}/{args.part}/{args.agent}/{re.sub(r'[^A-Za-z0-9_.-]+', '', label)}"
     experiment = args.part.split("/")[0]
     try:
@@ -65,13 +86,16 @@ def main(argv: list[str] | None = None) -> list[float]:
         parser.error(f"{args.part} has no cell of agent {args.agent!r}; its agents: {[c.agent for c in part.cells]}")
     scores = []
     for seed in args.seeds:
-        job = replace(cell.jobs[0], seed=seed, hyperparams={**cell.jobs[0].hyperparams, **changes})
+        job = with_env_changes(
+            replace(cell.jobs[0], seed=seed, hyperparams={**cell.jobs[0].hyperparams, **changes}), env_changes
+        )
         job = replace(job, eval_episodes=args.episodes) if args.episodes else job
         result = completed_result(job) or run_job(job)
         if not result.ok:
             raise SystemExit(f"seed {seed} failed: {result.error}")
         scores.append(result.score_mean)
-        print(f"{args.part} {args.agent} {changes} seed {seed}: {result.score_mean:.2f} ({result.wall_time_s:.0f} s)")
+        settings = f"{changes} env {env_changes}" if env_changes else f"{changes}"
+        print(f"{args.part} {args.agent} {settings} seed {seed}: {result.score_mean:.2f} ({result.wall_time_s:.0f} s)")
     print(f"mean {np.mean(scores):.2f} ± {np.std(scores):.2f} over {len(scores)} seed(s); results in {out}/")
     return scores
 

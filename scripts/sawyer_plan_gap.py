@@ -26,6 +26,7 @@ import torch
 import envs  # noqa: F401  (registers ebm/SawyerReach-v0)
 from ebm_agent import EBMPlannerAgent
 from eval.jobs import EVAL_SEED_OFFSET
+from eval.plan_trace import trace_plans
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, float]]:
@@ -42,6 +43,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     parser.add_argument("--seed", type=int, default=EVAL_SEED_OFFSET, help="reset seed (the harness's evaluation)")
     parser.add_argument("--finger-weight", type=float, help="the env's inverse_finger_weight (default: the env's)")
     args = parser.parse_args(argv)
+    if args.steps < 1 or args.every < 1:
+        parser.error("--steps and --every must be >= 1")
     torch.set_num_threads(1)
     env_kwargs = {} if args.finger_weight is None else {"inverse_finger_weight": args.finger_weight}
     env = gym.make("ebm/SawyerReach-v0", **env_kwargs)
@@ -49,42 +52,32 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     spec = agent.goal_spec
     assert spec is not None
     kinematics = _FingerKinematics(env.unwrapped)  # type: ignore[arg-type]
-    obs, _ = env.reset(seed=args.seed)
-    state, start, rows, total = None, True, [], 0.0
+    rows, total = [], 0.0
     print(
         "| step | finger to target (m) | plan's last state to target (m) | plan finger vs FK of plan joints (m) "
         "| max plan error | max torque |"
     )
     print("|---|---|---|---|---|---|")
-    for step in range(args.steps):
-        action, state = agent.predict(obs, state=state, episode_start=np.array([start]), deterministic=True)
-        start = False
-        plans, _, steps = state  # [1, T+1, D], planned actions, [1] steps of the plan taken after this one
-        goal = np.asarray(obs["desired_goal"])
-        distance = float(np.linalg.norm(obs["observation"][spec.goal_indices] - goal))
-        plan_end = float(np.linalg.norm(plans[0, -1, spec.goal_indices] - goal))
-        planned_next = plans[0, int(steps[0])]  # the state this action should reach
-        inconsistency = kinematics.gap(plans[0, 1:])
-        obs, reward, terminated, truncated, _ = env.step(action)
-        total += float(reward)
-        error = float(np.abs(planned_next - obs["observation"]).max())
-        if step % args.every == 0:
-            row = {
-                "step": step,
-                "distance": distance,
-                "plan_end_distance": plan_end,
-                "plan_inconsistency": inconsistency,
-                "plan_error": error,
-                "max_torque": float(np.abs(action).max()),
-                "return": total,
-            }
-            rows.append(row)
-            print(
-                f"| {step} | {distance:.3f} | {plan_end:.3f} | {inconsistency:.3f} | {error:.3f} | {row['max_torque']:.2f} |"
-            )
-        if terminated or truncated:
-            break
-    print(f"return over {step + 1} steps: {total:.2f}")
+    for traced in trace_plans(agent, env, args.steps, args.seed):
+        total += traced.reward
+        if traced.step % args.every:
+            continue
+        goal = np.asarray(traced.obs["desired_goal"])
+        row = {
+            "step": traced.step,
+            "distance": float(np.linalg.norm(traced.obs["observation"][spec.goal_indices] - goal)),
+            "plan_end_distance": float(np.linalg.norm(traced.plan[-1, spec.goal_indices] - goal)),
+            "plan_inconsistency": kinematics.gap(traced.plan[1:]),
+            "plan_error": float(np.abs(traced.planned_next - traced.next_obs["observation"]).max()),
+            "max_torque": float(np.abs(traced.action).max()),
+            "return": total,
+        }
+        rows.append(row)
+        print(
+            f"| {row['step']} | {row['distance']:.3f} | {row['plan_end_distance']:.3f} | {row['plan_inconsistency']:.3f} "
+            f"| {row['plan_error']:.3f} | {row['max_torque']:.2f} |"
+        )
+    print(f"return over {traced.step + 1} steps: {total:.2f}")
     if rows:
         rows[-1]["return"] = total
     return rows

@@ -154,8 +154,9 @@ def test_bad_input_raises_clear_errors():
     assert env.inverse_dynamics(np.zeros((0, 4)), np.zeros((0, 4))).shape == (0, 2)
 
 
-def test_inverse_dynamics_recovers_random_actions_and_reproduces_next_states():
-    env = ReacherEnv(goal=None)
+@pytest.mark.parametrize("angle_weight", [1.0, 30.0])
+def test_inverse_dynamics_recovers_random_actions_and_reproduces_next_states(angle_weight):
+    env = ReacherEnv(goal=None, inverse_angle_weight=angle_weight)
     states, next_states, actions = _random_transitions(env, episodes=6, steps=50, seed=100)
     recovered = env.inverse_dynamics(states, next_states)
     assert recovered.shape == actions.shape and recovered.dtype == np.float32
@@ -182,6 +183,22 @@ def test_inverse_dynamics_clips_unreachable_targets_to_the_action_bounds():
     far = state + np.array([0.0, 0.0, 5.0, -5.0])  # far more velocity change than full torque gives in 20 ms
     action = env.inverse_dynamics(state, far)
     np.testing.assert_allclose(action, [1.0, -1.0])
+
+
+def test_the_angle_weight_decides_how_a_plan_that_jumps_its_angles_is_followed():
+    """One step of full torque moves an angle by ~0.013 and a velocity / 10 by ~0.4: a wanted angle jump without the
+    velocity to match is fitted on the velocity dims at weight 1 (almost no torque), on the angles at weight 30."""
+    jump = np.array([0.3, -0.3, 0.0, 0.0])
+    actions = {}
+    for weight in (1.0, 30.0):
+        env = ReacherEnv(inverse_angle_weight=weight)
+        state = env.reset(seed=0)[0]["observation"]
+        actions[weight] = env.inverse_dynamics(state, state + jump)
+    assert np.abs(actions[1.0]).max() < 0.05
+    np.testing.assert_allclose(actions[30.0], [1.0, -1.0])
+    for weight in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="inverse_angle_weight"):
+            ReacherEnv(inverse_angle_weight=weight)
 
 
 def test_exploration_action_is_uniform_in_the_action_space():

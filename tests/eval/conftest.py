@@ -28,16 +28,26 @@ def load_script():
     return _load_script
 
 
-@pytest.fixture
-def untrained_sawyer_model(tmp_path) -> Path:
-    """A saved, untrained EBM on ``ebm/SawyerReach-v0`` with a tiny planner (8 samples, 2 iterations)."""
+def _save_untrained_model(env_id: str, path: Path) -> Path:
+    """Save an untrained EBM on ``env_id`` with a tiny planner (8 samples, 2 iterations) to ``path``."""
     import gymnasium as gym
 
     import envs  # noqa: F401  (registers the ebm/ ids)
     from ebm_agent import EBMPlannerAgent
 
-    env = gym.make("ebm/SawyerReach-v0")
+    env = gym.make(env_id)
     agent = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu", planner_config={"num_samples": 8, "iterations": 2})
-    path = tmp_path / "sawyer.zip"
     agent.save(path)
     return path
+
+
+@pytest.fixture
+def untrained_sawyer_model(tmp_path) -> Path:
+    """A saved, untrained EBM on ``ebm/SawyerReach-v0`` with a tiny planner (8 samples, 2 iterations)."""
+    return _save_untrained_model("ebm/SawyerReach-v0", tmp_path / "sawyer.zip")
+
+
+@pytest.fixture
+def untrained_reacher_model(tmp_path) -> Path:
+    """A saved, untrained EBM on ``ebm/Reacher-v0`` with a tiny planner (8 samples, 2 iterations)."""
+    return _save_untrained_model("ebm/Reacher-v0", tmp_path / "reacher.zip")

@@ -36,6 +36,8 @@ def test_every_experiment_builds_with_the_paper_budgets(tmp_path):
         assert job.eval_episodes == 10 and job.seed in (0, 1, 2)
         if job.mode == "pretrained":
             assert job.timesteps == 100_000
+        elif job.mode == "untrained":
+            assert job.timesteps == 0 and job.agent == "ebm"
         elif job.agent != "ppo":
             assert job.timesteps == 50_000
     for part in parts:
@@ -59,9 +61,9 @@ def test_paper_numbers_sit_beside_the_cells(tmp_path):
     assert cells[("inverse_dynamics/sawyer", "ebm", "ground truth")].paper == -3782
     assert cells[("inverse_dynamics/sawyer", "ebm", "RLS")].paper == -4694
     assert cells[("fixed_on_variable/sawyer", "ebm", "trained fixed, evaluated variable")].paper == -4547
-    from eval.claims import SCORE_CLAIMS
+    from eval.claims import CONTROL_CLAIMS, SCORE_CLAIMS
 
-    for claim in SCORE_CLAIMS:  # every claim names cells that exist
+    for claim in SCORE_CLAIMS + CONTROL_CLAIMS:  # every claim names cells that exist
         for _label, better, worse in claim.comparisons:
             assert better in cells and worse in cells
     obstacle = next(p for p in paper_parts(tmp_path, ["obstacle"]))
@@ -89,6 +91,28 @@ def test_cells_configure_their_runs(tmp_path):
     assert [c.jobs for c in on_variable] == [c.jobs for c in fixed]
     assert all(c.evaluation == "variable_goal" for c in on_variable)
     assert fixed[0].jobs[0].extra_evaluations == {"variable_goal": {"goal": "variable"}}
+    # The untrained controls: the EBM of the same env configuration, budget 0, no paper number.
+    for name, online, untrained in (
+        ("table1/reacher/untrained", parts["table1/reacher/online"], parts["table1/reacher/untrained"]),
+        ("table2/sawyer/untrained_fixed", parts["table2/sawyer/online_fixed"], parts["table2/sawyer/untrained_fixed"]),
+        (
+            "table2/sawyer/untrained_variable",
+            parts["table2/sawyer/online_variable"],
+            parts["table2/sawyer/untrained_variable"],
+        ),
+    ):
+        (cell,) = untrained.cells
+        trained = next(c for c in online.cells if c.agent == "ebm").jobs[0]
+        job = cell.jobs[0]
+        assert (cell.agent, cell.setting, cell.paper, job.mode, job.timesteps) == ("ebm", "untrained", None, "untrained", 0), (
+            name
+        )
+        assert (job.env_kwargs, job.eval_env_kwargs, job.hyperparams) == (
+            trained.env_kwargs,
+            trained.eval_env_kwargs,
+            trained.hyperparams,
+        ), name
+        assert job.run_dir != trained.run_dir
 
 
 def test_part_globs_and_unknown_names(tmp_path):
@@ -96,6 +120,7 @@ def test_part_globs_and_unknown_names(tmp_path):
     assert [p.name for p in select_parts(parts, ["table1/particle/*"])] == [
         "table1/particle/pretrained",
         "table1/particle/online",
+        "table1/particle/untrained",
     ]
     sawyer = {p.name for p in select_parts(parts, ["*/sawyer*"])}
     assert "table2/sawyer/online_fixed" in sawyer and "sawyer_exploration/sawyer" in sawyer
@@ -206,7 +231,9 @@ class FakeExecutor:
 
 
 def test_resume_skips_complete_jobs_and_reruns_incomplete_ones(tmp_path):
-    parts = select_parts(build_parts(["table1"], make_context("smoke", str(tmp_path))), ["table1/particle/*"])
+    parts = select_parts(
+        build_parts(["table1"], make_context("smoke", str(tmp_path))), ["table1/particle/pretrained", "table1/particle/online"]
+    )
     executor, messages = FakeExecutor(), []
     first = run_parts(parts, executor, "ebm-eval first", progress=False, log=messages.append)
     assert first.ok and len(executor.ran) == 4 and not first.skipped

@@ -136,3 +136,25 @@ def test_a_run_folder_held_by_a_live_process_is_left_alone_and_a_stale_lock_take
     lock.write_text(json_module.dumps({"host": socket.gethostname(), "pid": 2**22 + 12345}))  # no such process
     assert run_job(job).ok
     assert not lock.exists()  # released when the run ends
+
+
+def test_an_untrained_job_evaluates_the_agent_as_built(tmp_path):
+    """mode="untrained": no transition is learned from; the score is that of a fresh agent of the same seed."""
+    import gymnasium as gym
+    import torch
+
+    from ebm_agent import EBMPlannerAgent
+
+    tiny = {"planner_config": {"num_samples": 8, "iterations": 2}}
+    job = _job(tmp_path, agent="ebm", mode="untrained", timesteps=0, eval_freq=1, hyperparams=tiny)
+    result = run_job(job)
+    assert result.ok, result.error
+    assert result.timesteps == 0 and len(result.episode_scores) == 2
+    metrics = json.loads((job.run_dir / "metrics.json").read_text())
+    assert metrics["mode"] == "untrained" and metrics["budget_respected"] and metrics["pretraining"] is None
+    saved = EBMPlannerAgent.load(job.run_dir / "model.zip", device="cpu")
+    fresh = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=job.seed, device="cpu", **tiny)
+    for name, tensor in fresh.policy.state_dict().items():
+        assert torch.equal(saved.policy.state_dict()[name], tensor), name
+    with pytest.raises(ValueError, match="timesteps must be 0"):
+        _job(tmp_path, agent="ebm", mode="untrained", timesteps=10)

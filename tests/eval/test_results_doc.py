@@ -14,6 +14,7 @@ from eval.claims import (
     FAILS,
     HOLDS,
     INCONCLUSIVE,
+    LEARNING_CONTROL,
     MISSING,
     Comparison,
     combine,
@@ -176,10 +177,11 @@ def test_a_claim_holds_only_when_every_comparison_holds():
 
 
 def test_claims_follow_the_numbers_they_are_given():
-    def lookup(ebm_score: float, ff_score: float, ppo_score: float | None):
+    def lookup(ebm_score: float, ff_score: float, ppo_score: float | None, untrained_score: float | None = -1000.0):
         def scores(key):
-            _part, agent, _setting = key
+            _part, agent, setting = key
             value = {"ebm": ebm_score, "action-ff": ff_score, "ppo": ppo_score}[agent]
+            value = untrained_score if setting == "untrained" else value
             return [] if value is None else [value, value - 1, value + 1]
 
         return scores
@@ -188,12 +190,18 @@ def test_claims_follow_the_numbers_they_are_given():
         return {"coverage": {"ebm": [0.9, 0.8], "random": [0.3, 0.2]}, "timesteps": [1, 2]}  # the fallback's guess
 
     claims = evaluate_claims(lookup(-10.0, -100.0, -50.0), figures)
-    assert [c.verdict for c in claims] == [HOLDS, HOLDS, HOLDS]
+    assert [c.verdict for c in claims] == [HOLDS, HOLDS, HOLDS, HOLDS]
+    assert claims[3].text == LEARNING_CONTROL
+    assert claims[3].comparisons[0].evidence.startswith("EBM -10.00") and "vs untrained EBM -1000.00" in (
+        claims[3].comparisons[0].evidence
+    )
     claims = evaluate_claims(lookup(-100.0, -10.0, -500.0), lambda part: None)
-    assert [c.verdict for c in claims] == [FAILS, HOLDS, MISSING]
-    claims = evaluate_claims(lookup(-10.0, -100.0, None), lambda part: {"nothing": 1.0})
+    assert [c.verdict for c in claims] == [FAILS, HOLDS, MISSING, HOLDS]
+    claims = evaluate_claims(lookup(-10.0, -100.0, None, untrained_score=-9.0), lambda part: {"nothing": 1.0})
     assert claims[1].verdict == MISSING and claims[0].verdict == HOLDS
     assert "reports no EBM / random pair" in claims[2].comparisons[0].evidence
+    assert claims[3].verdict == FAILS  # the untrained agent scores higher: the win is not the learned energy's
+    assert evaluate_claims(lookup(-10.0, -100.0, None, untrained_score=None), figures)[3].verdict == MISSING
 
 
 def _agents(**agents):
