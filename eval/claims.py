@@ -122,7 +122,7 @@ CONTROL_CLAIMS = (
             (
                 "sawyer",
                 ("table2/sawyer/online_fixed", "ebm", "online fixed"),
-                ("table2/sawyer/untrained_fixed", "ebm", "untrained"),
+                ("table2/sawyer/untrained_fixed", "ebm", "untrained fixed"),
             ),
         ),
     ),
@@ -323,7 +323,7 @@ def _score_claim(spec: ScoreClaim, scores: ScoreLookup) -> Claim:
 
 def _name(key: CellKey) -> str:
     name = AGENT_NAMES.get(key[1], key[1])
-    return f"untrained {name}" if key[2] == "untrained" else name
+    return f"untrained {name}" if key[2].startswith("untrained") else name
 
 
 def render_claims(claims: Sequence[Claim]) -> str:

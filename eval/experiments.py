@@ -98,8 +98,9 @@ def _table1(context: Context) -> list[Part]:
 def untrained_part(context: Context, experiment: str, name: str, env: str, env_kwargs: dict | None = None) -> Part:
     """The EBM as built, evaluated without learning (no paper number): the control that says how much of a trained
     EBM's score its planner and the env's ground-truth inverse dynamics give without any learned energy."""
+    setting = "untrained" + ("" if env != "sawyer" else " variable" if env_kwargs == VARIABLE_GOAL else " fixed")
     variant = "untrained" + ("_variable_goal" if env_kwargs == VARIABLE_GOAL else "")
-    cell = make_cell(context, "untrained", env, "ebm", variant, mode="untrained", env_kwargs=env_kwargs)
+    cell = make_cell(context, setting, env, "ebm", variant, mode="untrained", env_kwargs=env_kwargs)
     return table_part(context, experiment, name, [cell])
 
 
