@@ -6,7 +6,8 @@ far a plan's states are from what the env then does.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+import argparse
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,7 +16,7 @@ import numpy as np
 
 from ebm_agent import EBMPlannerAgent
 
-__all__ = ["PlanStep", "trace_plans"]
+__all__ = ["PlanStep", "load_traced_agent", "trace_parser", "trace_plans"]
 
 
 @dataclass(frozen=True)
@@ -65,3 +66,48 @@ def trace_plans(agent: EBMPlannerAgent, env: gym.Env, steps: int, seed: int) -> 
         if done:
             return
         obs = next_obs
+
+
+def trace_parser(description: str, env_id: str, steps: int, every: int, weight_flag: str) -> argparse.ArgumentParser:
+    """The command line of a plan-gap script: a saved model, ``--steps``, ``--every``, ``--seed`` and one env weight.
+
+    :param description: the script's one-line purpose.
+    :param env_id: the env the model was trained on.
+    :param steps: default steps of the episode.
+    :param every: default printing interval.
+    :param weight_flag: the env weight's flag (``--finger-weight`` sets ``inverse_finger_weight``).
+    :return: the parser.
+    """
+    from eval.jobs import EVAL_SEED_OFFSET
+
+    name = "inverse_" + weight_flag.removeprefix("--").replace("-", "_")
+    parser = argparse.ArgumentParser(description=description)
+    parser.add_argument("model", help=f"a saved EBMPlannerAgent trained on {env_id}")
+    parser.add_argument("--steps", type=int, default=steps, help="steps of the episode to run")
+    parser.add_argument("--every", type=int, default=every, help="print every this many steps")
+    parser.add_argument("--seed", type=int, default=EVAL_SEED_OFFSET, help="reset seed (the harness's evaluation)")
+    parser.add_argument(weight_flag, type=float, dest="weight", help=f"the env's {name} (default: the env's)")
+    parser.set_defaults(weight_name=name)
+    return parser
+
+
+def load_traced_agent(
+    parser: argparse.ArgumentParser, argv: Sequence[str] | None, env_id: str
+) -> tuple[argparse.Namespace, gym.Env, EBMPlannerAgent]:
+    """Parse a plan-gap script's arguments, make the env (with the weight, if given) and load the model on it.
+
+    :param parser: from ``trace_parser``.
+    :param argv: the arguments (None: ``sys.argv``).
+    :param env_id: the env.
+    :return: the arguments, the env and the agent.
+    """
+    import torch
+
+    import envs  # noqa: F401  (registers the ebm/ ids)
+
+    args = parser.parse_args(argv)
+    if args.steps < 1 or args.every < 1:
+        parser.error("--steps and --every must be >= 1")
+    torch.set_num_threads(1)
+    env = gym.make(env_id, **({} if args.weight is None else {args.weight_name: args.weight}))
+    return args, env, EBMPlannerAgent.load(args.model, env=env)

@@ -16,18 +16,13 @@ there is fitted by the inverse dynamics on its velocity dims, which then ask for
 
 from __future__ import annotations
 
-import argparse
 import math
 
-import gymnasium as gym
 import numpy as np
-import torch
 
 import envs  # noqa: F401  (registers ebm/Reacher-v0)
-from ebm_agent import EBMPlannerAgent
 from envs.reacher import ReacherEnv, wrap_difference, wrapped_l1_distance
-from eval.jobs import EVAL_SEED_OFFSET
-from eval.plan_trace import trace_plans
+from eval.plan_trace import load_traced_agent, trace_parser, trace_plans
 
 
 def velocity_inconsistency(plan: np.ndarray, dt: float) -> float:
@@ -60,19 +55,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     :return: one row per printed step: ``step``, ``distance``, ``plan_end_distance``, ``plan_inconsistency``,
         ``plan_error``, ``max_torque``, ``new_plan``; the last row also ``return`` and ``plans``.
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("model", help="a saved EBMPlannerAgent trained on ebm/Reacher-v0")
-    parser.add_argument("--steps", type=int, default=50, help="steps of the episode to run")
-    parser.add_argument("--every", type=int, default=5, help="print every this many steps")
-    parser.add_argument("--seed", type=int, default=EVAL_SEED_OFFSET, help="reset seed (the harness's evaluation)")
-    parser.add_argument("--angle-weight", type=float, help="the env's inverse_angle_weight (default: the env's)")
-    args = parser.parse_args(argv)
-    if args.steps < 1 or args.every < 1:
-        parser.error("--steps and --every must be >= 1")
-    torch.set_num_threads(1)
-    env_kwargs = {} if args.angle_weight is None else {"inverse_angle_weight": args.angle_weight}
-    env = gym.make("ebm/Reacher-v0", **env_kwargs)
-    agent = EBMPlannerAgent.load(args.model, env=env)
+    parser = trace_parser(__doc__.splitlines()[0], "ebm/Reacher-v0", 50, 5, "--angle-weight")
+    args, env, agent = load_traced_agent(parser, argv, "ebm/Reacher-v0")
     dt = env.unwrapped.dt  # type: ignore[attr-defined]
     assert isinstance(env.unwrapped, ReacherEnv)
     rows, total, plans = [], 0.0, 0

@@ -16,17 +16,12 @@ rather than its joints; default: the env's).
 
 from __future__ import annotations
 
-import argparse
-
 import gymnasium as gym
 import mujoco
 import numpy as np
-import torch
 
 import envs  # noqa: F401  (registers ebm/SawyerReach-v0)
-from ebm_agent import EBMPlannerAgent
-from eval.jobs import EVAL_SEED_OFFSET
-from eval.plan_trace import trace_plans
+from eval.plan_trace import load_traced_agent, trace_parser, trace_plans
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, float]]:
@@ -36,19 +31,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, float]]:
     :return: one row per printed step: ``step``, ``distance``, ``plan_end_distance``, ``plan_inconsistency``,
         ``plan_error``, ``max_torque``, ``return`` (so far).
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("model", help="a saved EBMPlannerAgent trained on ebm/SawyerReach-v0")
-    parser.add_argument("--steps", type=int, default=150, help="steps of the episode to run")
-    parser.add_argument("--every", type=int, default=10, help="print every this many steps")
-    parser.add_argument("--seed", type=int, default=EVAL_SEED_OFFSET, help="reset seed (the harness's evaluation)")
-    parser.add_argument("--finger-weight", type=float, help="the env's inverse_finger_weight (default: the env's)")
-    args = parser.parse_args(argv)
-    if args.steps < 1 or args.every < 1:
-        parser.error("--steps and --every must be >= 1")
-    torch.set_num_threads(1)
-    env_kwargs = {} if args.finger_weight is None else {"inverse_finger_weight": args.finger_weight}
-    env = gym.make("ebm/SawyerReach-v0", **env_kwargs)
-    agent = EBMPlannerAgent.load(args.model, env=env)
+    parser = trace_parser(__doc__.splitlines()[0], "ebm/SawyerReach-v0", 150, 10, "--finger-weight")
+    args, env, agent = load_traced_agent(parser, argv, "ebm/SawyerReach-v0")
     spec = agent.goal_spec
     assert spec is not None
     kinematics = _FingerKinematics(env.unwrapped)  # type: ignore[arg-type]

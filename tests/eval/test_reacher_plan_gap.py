@@ -8,6 +8,7 @@ import pytest
 
 import envs  # noqa: F401
 from envs.reacher import wrapped_l1_distance
+from eval.jobs import EVAL_SEED_OFFSET
 
 pytest.importorskip("mujoco")
 
@@ -34,7 +35,7 @@ def test_it_prints_the_distance_the_plans_and_their_count(load_script, untrained
     script = load_script("reacher_plan_gap")
     rows = script.main([str(untrained_reacher_model), "--steps", "4", "--every", "2", "--angle-weight", "30"])
     assert [row["step"] for row in rows] == [0, 2]
-    start = gym.make("ebm/Reacher-v0").reset(seed=script.EVAL_SEED_OFFSET)[0]
+    start = gym.make("ebm/Reacher-v0").reset(seed=EVAL_SEED_OFFSET)[0]
     assert rows[0]["distance"] == pytest.approx(float(wrapped_l1_distance(start["achieved_goal"], start["desired_goal"])))
     assert all(row["plan_error"] < 1.0 for row in rows)  # angles compared across the seam, not 2 apart
     assert rows[0]["new_plan"] == 1.0  # the episode's first step makes a plan

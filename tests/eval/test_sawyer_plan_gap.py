@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import envs  # noqa: F401
+from eval.jobs import EVAL_SEED_OFFSET
 
 pytest.importorskip("mujoco")
 
@@ -15,7 +16,7 @@ def test_it_prints_the_real_and_the_planned_distance(load_script, untrained_sawy
     script = load_script("sawyer_plan_gap")
     rows = script.main([str(untrained_sawyer_model), "--steps", "4", "--every", "2", "--finger-weight", "0"])
     assert [row["step"] for row in rows] == [0, 2]
-    start = gym.make("ebm/SawyerReach-v0").reset(seed=script.EVAL_SEED_OFFSET)[0]
+    start = gym.make("ebm/SawyerReach-v0").reset(seed=EVAL_SEED_OFFSET)[0]
     first = np.linalg.norm(start["observation"][14:17] - start["desired_goal"])  # the finger's dims
     assert rows[0]["distance"] == pytest.approx(first)
     assert all(0 <= row["max_torque"] <= 1 and np.isfinite(row["plan_error"]) for row in rows)
