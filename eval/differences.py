@@ -71,8 +71,13 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         " (the raw-input runs are in docs/results.md of commit cdb9407). Online the EBM stays near the random policy's "
         "level (anchors above): plans move the angles faster than the torques allow and a new plan starts about every "
         "1.3 transitions (`plan/num_plans` in the runs' TensorBoard logs), because the reward-form goal term outweighs "
-        "the small energy gap the loss keeps between real and planned transitions (docs/agent.md, 'Status'). The "
-        "original's goal term was a far weaker time-ramped mean square; a per-env goal weight is the next thing to try.",
+        "the small energy gap the loss keeps between real and planned transitions (docs/agent.md, 'Status'). Such "
+        "plans move their angles several times further than their own velocities say, and our ground-truth inverse "
+        "dynamics, weighting angles and velocities / 10 equally, fits them on the velocities and asks for little "
+        "torque (`python scripts/reacher_plan_gap.py <model.zip>`). Weighting the angles 30 to 1 makes even an "
+        "untrained EBM reach the goal (-4.40 over 3 seeds: `python scripts/probe.py table1/reacher/untrained ebm --env "
+        "inverse_angle_weight=30 --seeds 0 1 2`), so the default keeps equal weights and these cells keep testing the "
+        "energy (docs/mujoco_envs.md, 'The Reacher's angle weight'). A weaker goal (weight 0.3) did not help online.",
     ),
     Explanation(
         "table1/reacher/online",
@@ -125,9 +130,10 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "finger as well as the joints, weighted 100 to 1 (SawyerReachEnv.inverse_finger_weight, docs/mujoco_envs.md); "
         "with the joints alone, as before 2026-12-02, the real finger drifted away from the target "
         "(`python scripts/sawyer_plan_gap.py <model.zip> --finger-weight 0`, docs/agent.md 'Status'). The original's "
-        "sampling optimiser scored all 20 observation dims with equal weights. Our Sawyer is not the authors' arm but "
-        "a torque-driven build of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's "
-        "only in scale.",
+        "sampling optimiser scored all 20 observation dims with equal weights. With that inverse dynamics an untrained "
+        "EBM already reaches the target (the untrained rows of Table 2), so these cells measure the planner and the "
+        "inverse dynamics more than the learned energy. Our Sawyer is not the authors' arm but a torque-driven build "
+        "of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's only in scale.",
     ),
     Explanation(
         "sawyer_ppo/*",
