@@ -79,3 +79,11 @@ def test_the_action_ff_sawyer_run_is_priced_without_the_inverse_dynamics(tmp_pat
     # Measured 2026-12-02: about 21 min for the Action FF's run, 63 min for the EBM's (with the rescue ceiling).
     assert 15 * 60 < by_agent["action-ff"] < 30 * 60
     assert 45 * 60 < by_agent["ebm"] < 90 * 60
+
+
+def test_an_untrained_part_costs_only_its_evaluations(tmp_path):
+    untrained = _part(tmp_path, "table2/sawyer/untrained_fixed").jobs[0]
+    online = next(job for job in _part(tmp_path, "table2/sawyer/online_fixed").jobs if job.agent == "ebm")
+    evaluation = untrained.eval_episodes * 1000  # 10 episodes of the Sawyer's 1,000 steps
+    assert 0 < estimate_job_seconds(untrained) < estimate_job_seconds(online) / 5
+    assert estimate_job_seconds(untrained) > evaluation * 0.01  # acting costs at least a hundredth of a second a step
