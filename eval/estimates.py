@@ -79,8 +79,8 @@ def estimate_job_seconds(job: Job) -> float:
     per_step, act = STEP_SECONDS_BY_AGENT.get((job.env_short, job.agent), (per_step, act))
     episode = _episode_length(job)
     extra = 1 + len(job.extra_evaluations)
-    if job.mode == "untrained":
-        return extra * job.eval_episodes * episode * act
+    if job.mode == "untrained":  # an untrained planner's plans rarely hold: it plans about every step, as in learning
+        return extra * job.eval_episodes * episode * per_step
     if job.mode == "online":
         evaluations = max(job.timesteps // max(job.eval_freq, 1), 1)
         return job.timesteps * per_step + (evaluations + extra - 1) * job.eval_episodes * episode * act
