@@ -89,6 +89,8 @@ def resolve_settings(args: argparse.Namespace) -> dict[str, Any]:
     for key in ("timesteps", "eval_episodes", "eval_freq", "jobs"):
         if not _is_positive_int(settings[key]):
             raise ValueError(f"{key} must be a positive integer, got {settings[key]!r}")
+    if settings["threads"] is not None and not _is_positive_int(settings["threads"]):
+        raise ValueError(f"threads must be a positive integer, got {settings['threads']!r}")
     if any(isinstance(s, bool) or not isinstance(s, int) or s < 0 for s in settings["seeds"]):
         raise ValueError(f"seeds must be non-negative integers, got {settings['seeds']!r}")
     _check_ray_settings(settings)
@@ -103,6 +105,8 @@ RAY_ONLY = ("address", "cpus_per_job", "gpus_per_job")
 
 def _check_ray_settings(settings: dict[str, Any]) -> None:
     """Reject Ray-only settings without ``--executor ray`` and fill in their defaults with it."""
+    if settings["executor"] == "ray" and settings.get("threads") is not None:
+        raise ValueError("--threads applies to the local executor; with --executor ray, --cpus-per-job sets them")
     if settings["executor"] != "ray":
         given = [key for key in RAY_ONLY if settings[key] is not None]
         if given:
@@ -126,11 +130,11 @@ def executor_options(settings: dict[str, Any]) -> dict[str, Any]:
     """Constructor arguments of the settings' executor.
 
     :param settings: from ``resolve_settings``.
-    :return: ``jobs`` for the local executor; address and per-run resources for Ray, whose local instance gets
-        CPUs for ``jobs`` runs at once.
+    :return: ``jobs`` and ``threads_per_job`` for the local executor; address and per-run resources for Ray, whose
+        local instance gets CPUs for ``jobs`` runs at once.
     """
     if settings["executor"] != "ray":
-        return {"jobs": settings["jobs"]}
+        return {"jobs": settings["jobs"], "threads_per_job": settings["threads"]}
     cpus = settings["cpus_per_job"]
     return {
         "address": settings["address"],
@@ -294,6 +298,7 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
         "report_only": bool(args.report_only),
         "device": args.device or "auto",
         "jobs": args.jobs or 1,
+        "threads": args.threads,
         "executor": args.executor or "local",
         "address": args.address,
         "cpus_per_job": args.cpus_per_job,

@@ -47,14 +47,20 @@ class LocalExecutor:
 
     :param jobs: number of jobs run at once (worker processes).
     :param runner: the function run per job; it must be importable by name (picklable) for ``jobs > 1``.
-    :param threads_per_job: torch threads of each worker process (ignored in-process).
+    :param threads_per_job: torch threads of each run: of each worker process, or of this process for ``jobs=1``
+        (None: 1 per worker, and torch's own setting in-process, every core by default). Several processes on the
+        same cores, each with torch's default, oversubscribe them: give each 1.
     """
 
-    def __init__(self, jobs: int = 1, runner: Runner = run_job, threads_per_job: int = 1) -> None:
+    def __init__(self, jobs: int = 1, runner: Runner = run_job, threads_per_job: int | None = None) -> None:
         if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
             raise ValueError(f"jobs must be a positive integer (parallel worker processes), got {jobs!r}")
         self.jobs = jobs
         self.runner = runner
+        if threads_per_job is not None and (
+            isinstance(threads_per_job, bool) or not isinstance(threads_per_job, int) or threads_per_job < 1
+        ):
+            raise ValueError(f"threads_per_job must be a positive integer or None, got {threads_per_job!r}")
         self.threads_per_job = threads_per_job
 
     def map(self, jobs: Sequence[Job], progress: bool = True) -> list[JobResult]:
@@ -69,6 +75,8 @@ class LocalExecutor:
             return []
         with tqdm(total=len(jobs), desc="ebm-eval jobs", unit="job", disable=not progress) as bar:
             if self.jobs == 1:
+                if self.threads_per_job is not None:
+                    _limit_threads(self.threads_per_job)
                 return [self._run_in_process(job, bar) for job in jobs]
             return self._run_in_pool(jobs, bar)
 
@@ -87,7 +95,7 @@ class LocalExecutor:
         results: list[JobResult | None] = [None] * len(jobs)
         workers = min(self.jobs, len(jobs))
         with ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_limit_threads, initargs=(self.threads_per_job,)
+            workers, mp_context=context, initializer=_limit_threads, initargs=(self.threads_per_job or 1,)
         ) as pool:
             futures: dict[Future[JobResult], int] = {pool.submit(self.runner, job): i for i, job in enumerate(jobs)}
             for future in as_completed(futures):

@@ -25,6 +25,7 @@ DEFAULTS: dict[str, Any] = {
     "hyperparams": {},
     "device": "auto",
     "jobs": 1,
+    "threads": None,  # local only: torch's default in-process (every core), 1 per --jobs worker
     "executor": "local",
     "address": None,  # Ray only: a local Ray instance
     "cpus_per_job": None,  # Ray only: 1
@@ -181,6 +182,12 @@ def build_parser() -> argparse.ArgumentParser:
         "-c", "--config", help="preset: a bundled name (see eval/presets/) or a YAML file; explicit flags win over it"
     )
     parser.add_argument("-j", "--jobs", type=positive_int, help="runs executed at once, one process each (default: 1)")
+    parser.add_argument(
+        "--threads",
+        type=positive_int,
+        help="torch threads of each run with the local executor (default: torch's own, every core, for --jobs 1; "
+        "1 per run otherwise); give 1 to each of several ebm-eval processes that share the cores",
+    )
     parser.add_argument(
         "--executor",
         help="where runs execute: local (process pool; default) or ray (Ray tasks, needs the ray extra; see docs/ray.md)",

@@ -121,6 +121,8 @@ def test_every_bundled_preset_is_valid():
         (["--timesteps", "many"], "expected a positive integer"),
         (["--eval-episodes", "0"], "must be a positive integer"),
         (["--jobs", "0"], "must be a positive integer"),
+        (["--threads", "0"], "--threads: must be a positive integer"),
+        (["--executor", "ray", "--threads", "1"], "--threads applies to the local executor"),
         (["--seeds", "-1"], "seeds are non-negative integers"),
         (["--baseline", "dqn"], "invalid choice: 'dqn'"),
         (["--config", "nope"], "unknown preset 'nope'"),

@@ -40,6 +40,26 @@ def test_in_process_failing_job_is_reported_and_the_others_kept():
     assert results[2].timesteps == 20
 
 
+def threads_runner(job: Job) -> JobResult:
+    """Reports the torch threads of the process it runs in as its timesteps."""
+    import torch
+
+    return JobResult(job=job, status="ok", timesteps=torch.get_num_threads())
+
+
+def test_threads_per_job_sets_torch_threads_in_process_and_defaults_to_one_per_worker():
+    import torch
+
+    before = torch.get_num_threads()
+    try:
+        assert LocalExecutor(jobs=1, runner=threads_runner).map(_jobs(1), progress=False)[0].timesteps == before
+        assert LocalExecutor(jobs=1, runner=threads_runner, threads_per_job=1).map(_jobs(1), progress=False)[0].timesteps == 1
+    finally:
+        torch.set_num_threads(before)
+    with pytest.raises(ValueError, match="threads_per_job"):
+        LocalExecutor(jobs=1, threads_per_job=0)
+
+
 def test_pool_executor_keeps_order_runs_elsewhere_and_survives_a_failure():
     # One pool for all three checks: spawning workers costs seconds.
     results = LocalExecutor(jobs=2, runner=failing_runner).map(_jobs(4), progress=True)

@@ -113,7 +113,8 @@ def test_cli_ray_settings_defaults_and_executor_options():
         "local_num_cpus": None,  # a cluster has its own CPUs
     }
     assert settings_of("--executor", "ray", "--device", "cuda", "--gpus-per-job", "0.25")["gpus_per_job"] == 0.25
-    assert executor_options(settings_of("--jobs", "2")) == {"jobs": 2}  # local: unchanged
+    assert executor_options(settings_of("--jobs", "2")) == {"jobs": 2, "threads_per_job": None}  # local
+    assert executor_options(settings_of("--threads", "1"))["threads_per_job"] == 1
 
 
 @pytest.mark.parametrize(
