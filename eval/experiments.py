@@ -365,15 +365,22 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
 
 
 def _in_progress(part: Part) -> str:
-    """``; resumes: <run> at t/T ...`` for the part's unfinished runs that kept a checkpoint (``eval.resume``)."""
+    """``; resumes <run> at t/T, ...`` for the part's unfinished runs that kept a checkpoint (``eval.resume``) and
+    the unfinished directed collections its pretrained runs wait for (``eval.pretraining``)."""
     from eval.jobs import RESUME_FOLDER, STATE_FILE
+    from eval.pretraining import collection_checkpoint_dir
     from eval.provenance import read_json_dict
 
-    found = []
+    found: list[str] = []
     for job in part.jobs:
         state = read_json_dict(job.run_dir / RESUME_FOLDER / STATE_FILE)
         if state is not None and not (job.run_dir / "metrics.json").exists():
             found.append(f"{job.agent} seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}")
+        if job.mode == "pretrained" and job.dataset != "random":
+            state = read_json_dict(collection_checkpoint_dir(job) / STATE_FILE)
+            entry = f"the directed dataset of seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}" if state else ""
+            if entry and entry not in found:  # the EBM and Action FF runs of a seed share it
+                found.append(entry)
     return f"; resumes {', '.join(found)}" if found else ""
 
 

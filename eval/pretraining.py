@@ -20,6 +20,12 @@ Datasets (paper Sec. 4.1-4.2; reference/original_code.md §2, §6):
 
 Datasets are cached under ``<out>/datasets/<env>/`` (a file lock keeps parallel jobs of one seed from collecting the
 same directed dataset twice); a cache file is named by a hash of everything that determines its content.
+
+A directed collection is an online run without evaluations: 100,000 Sawyer transitions take about two hours of one
+core, so it keeps a checkpoint every ``COLLECT_CHECKPOINT_EVERY`` transitions in ``<cache file>.collect/`` (the agent's
+``save_checkpoint``, the env with its recorder, the time spent; ``eval.resume.write_checkpoint_files``). The next job
+that needs the dataset goes on from there, and the dataset equals an uninterrupted collection's (tested); the folder
+is removed once the dataset is saved.
 """
 
 from __future__ import annotations
@@ -27,12 +33,15 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import shutil
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 from eval.jobs import Job, to_plain
@@ -45,6 +54,9 @@ OFFLINE_DEFAULTS: dict[str, int] = {"epochs": 10, "batch_size": 256}
 
 SEQUENTIAL_DEFAULTS: dict[str, int] = {"epochs": 1, "batch_size": 256, "repeat": 100}
 """The sequential ablation: each transition 100 times in a row (the paper), one pass over the repeated data."""
+
+COLLECT_CHECKPOINT_EVERY = 10_000
+"""Transitions between two checkpoints of a directed collection (about 12 min of one core on the Sawyer)."""
 
 
 def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
@@ -112,6 +124,15 @@ def dataset_path(job: Job) -> Path:
     return Path(job.out_dir) / "datasets" / job.env_short / f"{kind}_n{job.timesteps}_s{job.seed}_{digest}.npz"
 
 
+def collection_checkpoint_dir(job: Job) -> Path:
+    """Where an unfinished directed collection keeps its checkpoint: ``<cache file>.collect/``.
+
+    :param job: a pretrained job.
+    :return: the folder (it exists only while a collection is unfinished).
+    """
+    return dataset_path(job).with_suffix(".collect")
+
+
 def load_or_build_dataset(job: Job) -> tuple[TransitionDataset, Path]:
     """The job's base dataset from the cache, collected first when missing.
 
@@ -126,10 +147,18 @@ def load_or_build_dataset(job: Job) -> tuple[TransitionDataset, Path]:
             dataset = collect_random_transitions(job.env_id, job.timesteps, seed=job.seed, **job.env_kwargs)
         else:
             dataset = collect_directed_transitions(
-                job.env_id, job.env_kwargs, job.timesteps, job.seed, job.dataset_kwargs, job.device
+                job.env_id,
+                job.env_kwargs,
+                job.timesteps,
+                job.seed,
+                job.dataset_kwargs,
+                job.device,
+                checkpoint_dir=collection_checkpoint_dir(job),
+                checkpoint_every=COLLECT_CHECKPOINT_EVERY,
             )
         dataset.info = to_plain({**dataset.info, "env_kwargs": job.env_kwargs})
         dataset.save(path)
+        shutil.rmtree(collection_checkpoint_dir(job), ignore_errors=True)  # saved: the checkpoint is spent
     return dataset, path
 
 
@@ -140,8 +169,14 @@ def collect_directed_transitions(
     seed: int,
     agent_kwargs: dict[str, Any] | None = None,
     device: str = "auto",
+    checkpoint_dir: Path | None = None,
+    checkpoint_every: int = COLLECT_CHECKPOINT_EVERY,
 ) -> TransitionDataset:
     """The real transitions of an EBM agent learning online for ``num_transitions`` transitions, in order.
+
+    With ``checkpoint_dir``, a checkpoint is written there every ``checkpoint_every`` transitions, and a collection
+    found there (same env, size, seed and agent) is continued rather than started again; the result equals an
+    uninterrupted collection's.
 
     :param env_id: registered Gymnasium id.
     :param env_kwargs: keyword arguments of ``gym.make``.
@@ -149,23 +184,104 @@ def collect_directed_transitions(
     :param seed: seed of the agent and its env.
     :param agent_kwargs: keyword arguments of ``EBMPlannerAgent``.
     :param device: torch device of the agent.
-    :return: the dataset; ``info`` names the policy ``"directed"`` and the agent's settings.
+    :param checkpoint_dir: folder of the collection's checkpoint (None: no checkpoints).
+    :param checkpoint_every: transitions between two checkpoints.
+    :return: the dataset; ``info`` names the policy ``"directed"``, the agent's settings, the collection's time over
+        all processes (``collect_time_s``) and where it resumed (``resumed_at``).
     """
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
     import envs  # noqa: F401  registers the ebm/ ids
     from ebm_agent import EBMPlannerAgent
+    from eval.resume import read_checkpoint_files
 
-    recorder = TransitionRecorder(gym.make(env_id, **env_kwargs))
-    vec_env = DummyVecEnv([lambda: Monitor(recorder)])
-    agent = EBMPlannerAgent("MultiInputPolicy", vec_env, seed=seed, device=device, **(agent_kwargs or {}))
+    if checkpoint_every < 1:
+        raise ValueError(f"checkpoint_every must be a positive number of transitions, got {checkpoint_every}")
+    identity = to_plain(
+        {"env_id": env_id, "env_kwargs": env_kwargs, "size": num_transitions, "seed": seed, "agent_kwargs": agent_kwargs}
+    )
+    found = read_checkpoint_files(checkpoint_dir, identity) if checkpoint_dir is not None else None
+    if found is None:
+        recorder = TransitionRecorder(gym.make(env_id, **env_kwargs))
+        vec_env = DummyVecEnv([lambda: Monitor(recorder)])
+        agent = EBMPlannerAgent("MultiInputPolicy", vec_env, seed=seed, device=device, **(agent_kwargs or {}))
+        time_before, resumed_at = 0.0, []
+    else:  # go on from the checkpoint, with the env (and the transitions it recorded) as they were
+        state, agent_path, payload = found
+        recorder, vec_env = payload["recorder"], payload["env"]
+        agent = EBMPlannerAgent.load_checkpoint(agent_path, env=vec_env, device=device, force_reset=False)
+        time_before = float(state.get("collect_time_s", 0.0))
+        resumed_at = [*state.get("resumed_at", []), int(state["num_timesteps"])]
+    checkpoint = None
+    if checkpoint_dir is not None:
+        checkpoint = CollectionCheckpoint(
+            checkpoint_dir, checkpoint_every, num_transitions, recorder, identity, time_before, resumed_at
+        )
+    start = time.perf_counter()
     try:
-        agent.learn(total_timesteps=num_transitions)
+        agent.learn(
+            total_timesteps=num_transitions - int(agent.num_timesteps),
+            callback=checkpoint,
+            reset_num_timesteps=found is None,
+        )
     finally:
         vec_env.close()
-    info = {"env_id": env_id, "seed": seed, "policy": "directed", "agent": "EBMPlannerAgent", "agent_kwargs": agent_kwargs}
+    info = {
+        "env_id": env_id,
+        "seed": seed,
+        "policy": "directed",
+        "agent": "EBMPlannerAgent",
+        "agent_kwargs": agent_kwargs,
+        "collect_time_s": time_before + time.perf_counter() - start,
+        "resumed_at": resumed_at,
+    }
     return recorder.dataset(info=to_plain(info))
+
+
+class CollectionCheckpoint(BaseCallback):
+    """Checkpoints a directed collection every ``every`` transitions (none at the end: the dataset is then saved).
+
+    :param folder: the checkpoint folder.
+    :param every: transitions between two checkpoints.
+    :param total: the collection's size.
+    :param recorder: the recorder inside the agent's env (pickled with it, so the two stay one object).
+    :param identity: what a checkpoint must match to be continued (env, size, seed, agent settings).
+    :param time_before: time spent collecting by earlier processes.
+    :param resumed_at: transitions at which earlier processes resumed.
+    """
+
+    def __init__(
+        self,
+        folder: Path,
+        every: int,
+        total: int,
+        recorder: TransitionRecorder,
+        identity: dict[str, Any],
+        time_before: float = 0.0,
+        resumed_at: list[int] | None = None,
+    ) -> None:
+        super().__init__()
+        self.folder, self.every, self.total = Path(folder), int(every), int(total)
+        self.recorder, self.identity = recorder, dict(identity)
+        self.time_before, self.resumed_at = float(time_before), list(resumed_at or [])
+        self._start = time.perf_counter()
+        self._next = self.every
+
+    def _init_callback(self) -> None:
+        self._start = time.perf_counter()
+        self._next = (self.num_timesteps // self.every + 1) * self.every
+
+    def _on_step(self) -> bool:
+        from eval.resume import write_checkpoint_files
+
+        steps = self.num_timesteps
+        if self._next <= steps < self.total:
+            spent = self.time_before + time.perf_counter() - self._start
+            state = {**self.identity, "collect_time_s": spent, "resumed_at": self.resumed_at}
+            write_checkpoint_files(self.folder, self.model, {"env": self.model.get_env(), "recorder": self.recorder}, state)
+            self._next = (steps // self.every + 1) * self.every
+        return True
 
 
 class TransitionRecorder(gym.Wrapper):
@@ -266,10 +382,13 @@ def _file_lock(path: Path) -> Iterator[None]:
 
 
 __all__ = [
+    "COLLECT_CHECKPOINT_EVERY",
     "OFFLINE_DEFAULTS",
     "SEQUENTIAL_DEFAULTS",
+    "CollectionCheckpoint",
     "TransitionRecorder",
     "collect_directed_transitions",
+    "collection_checkpoint_dir",
     "dataset_path",
     "load_or_build_dataset",
     "pretrain",

@@ -45,8 +45,10 @@ __all__ = [
     "RunCheckpoint",
     "RunState",
     "discard_run_state",
+    "read_checkpoint_files",
     "read_run_state",
     "resumable",
+    "write_checkpoint_files",
     "write_run_state",
 ]
 
@@ -145,38 +147,78 @@ def write_run_state(job: Job, model: Any, callback: EvalCallback, learn_time_s: 
     :param resumed_at: transitions at which earlier processes resumed.
     :return: the ``state.json`` written.
     """
+    from eval.provenance import defaults_digest, job_fingerprint
+
+    curve: dict[str, Any] = {key: list(getattr(callback, key)) for key in CURVE_KEYS}
+    curve["best_mean_reward"] = float(callback.best_mean_reward)
+    curve["last_mean_reward"] = float(callback.last_mean_reward)
+    payload = {"train_env": model.get_env(), "eval_env": callback.eval_env, "curve": curve}
+    identity = {"fingerprint": job_fingerprint(job), "defaults_digest": defaults_digest(job)}
+    state = {**identity, "learn_time_s": learn_time_s, "resumed_at": resumed_at}
+    return write_checkpoint_files(job.run_dir / RESUME_FOLDER, model, payload, state)
+
+
+def write_checkpoint_files(folder: Path, model: Any, payload: dict[str, Any], state: dict[str, Any]) -> Path:
+    """Write one checkpoint into ``folder``: the agent, the pickled ``payload``, then ``state.json``; drop the last.
+
+    Each file is written atomically and ``state.json``, written last, names the pair, so a kill at any moment leaves
+    the previous checkpoint whole.
+
+    :param folder: the checkpoint folder (created when missing).
+    :param model: the agent (with ``save_checkpoint``); its ``num_timesteps`` names the files.
+    :param payload: what else resuming needs (envs, curves, recorders), pickled with cloudpickle; objects shared
+        between its entries stay shared when read back.
+    :param state: JSON-able facts about the checkpoint (identity, times); the file names and the step are added.
+    :return: the ``state.json`` written.
+    """
     import cloudpickle
 
     from ebm_agent.checkpoint_files import atomic_path
-    from eval.provenance import defaults_digest, job_fingerprint
 
-    folder = job.run_dir / RESUME_FOLDER
     folder.mkdir(parents=True, exist_ok=True)
     steps = int(model.num_timesteps)
     agent_file, envs_file = f"agent_{steps}.zip", f"envs_{steps}.pkl"
     model.save_checkpoint(folder / agent_file)
-    curve: dict[str, Any] = {key: list(getattr(callback, key)) for key in CURVE_KEYS}
-    curve["best_mean_reward"] = float(callback.best_mean_reward)
-    curve["last_mean_reward"] = float(callback.last_mean_reward)
-    payload = {"num_timesteps": steps, "train_env": model.get_env(), "eval_env": callback.eval_env, "curve": curve}
     with atomic_path(folder / envs_file) as temporary:
-        temporary.write_bytes(cloudpickle.dumps(payload))
-    state = {
-        "fingerprint": job_fingerprint(job),
-        "defaults_digest": defaults_digest(job),
-        "num_timesteps": steps,
-        "agent_file": agent_file,
-        "envs_file": envs_file,
-        "learn_time_s": learn_time_s,
-        "resumed_at": resumed_at,
-        "written_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
-    }
+        temporary.write_bytes(cloudpickle.dumps({**payload, "num_timesteps": steps}))
+    record = {**state, "num_timesteps": steps, "agent_file": agent_file, "envs_file": envs_file}
+    record["written_at"] = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     with atomic_path(folder / STATE_FILE) as temporary:
-        temporary.write_text(json.dumps(state, indent=2))
+        temporary.write_text(json.dumps(record, indent=2))
     for old in folder.iterdir():  # the previous checkpoint, now replaced
         if old.name not in (agent_file, envs_file, STATE_FILE):
             old.unlink(missing_ok=True)
     return folder / STATE_FILE
+
+
+def read_checkpoint_files(folder: Path, identity: dict[str, Any]) -> tuple[dict[str, Any], Path, dict[str, Any]] | None:
+    """The checkpoint in ``folder`` if its ``state.json`` carries ``identity`` and its files read back whole.
+
+    A checkpoint of another identity, or one that cannot be read, is removed (the work starts afresh).
+
+    :param folder: the checkpoint folder.
+    :param identity: entries that ``state.json`` must hold with these values (fingerprints, sizes).
+    :return: ``(state, agent file, payload)``, or None.
+    """
+    import pickle
+
+    from eval.provenance import read_json_dict
+
+    state = read_json_dict(folder / STATE_FILE)
+    if state is None:
+        return None
+    same = all(state.get(key) == value for key, value in identity.items())
+    agent_path, envs_path = folder / str(state.get("agent_file")), folder / str(state.get("envs_file"))
+    payload: dict[str, Any] | None = None
+    if same and agent_path.is_file() and envs_path.is_file():
+        try:
+            payload = pickle.loads(envs_path.read_bytes())
+        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, ValueError):
+            payload = None
+    if payload is None or payload.get("num_timesteps") != state.get("num_timesteps"):
+        shutil.rmtree(folder, ignore_errors=True)
+        return None
+    return state, agent_path, payload
 
 
 def read_run_state(job: Job) -> RunState | None:
@@ -187,25 +229,13 @@ def read_run_state(job: Job) -> RunState | None:
     :param job: the run.
     :return: the checkpoint, or None.
     """
-    import pickle
+    from eval.provenance import defaults_digest, job_fingerprint
 
-    from eval.provenance import defaults_digest, job_fingerprint, read_json_dict
-
-    folder = job.run_dir / RESUME_FOLDER
-    state = read_json_dict(folder / STATE_FILE)
-    if state is None:
+    identity = {"fingerprint": job_fingerprint(job), "defaults_digest": defaults_digest(job)}
+    found = read_checkpoint_files(job.run_dir / RESUME_FOLDER, identity)
+    if found is None:
         return None
-    same = state.get("fingerprint") == job_fingerprint(job) and state.get("defaults_digest") == defaults_digest(job)
-    agent_path, envs_path = folder / str(state.get("agent_file")), folder / str(state.get("envs_file"))
-    payload: dict[str, Any] | None = None
-    if same and agent_path.is_file() and envs_path.is_file():
-        try:
-            payload = pickle.loads(envs_path.read_bytes())
-        except (pickle.UnpicklingError, EOFError, AttributeError, ImportError, ValueError):
-            payload = None
-    if payload is None or payload.get("num_timesteps") != state.get("num_timesteps"):
-        discard_run_state(job)
-        return None
+    state, agent_path, payload = found
     return RunState(
         agent_path=agent_path,
         num_timesteps=int(state["num_timesteps"]),

@@ -87,3 +87,18 @@ def test_an_untrained_part_costs_only_its_evaluations(tmp_path):
     evaluation = untrained.eval_episodes * 1000  # 10 episodes of the Sawyer's 1,000 steps
     assert 0 < estimate_job_seconds(untrained) < estimate_job_seconds(online) / 5
     assert estimate_job_seconds(untrained) > evaluation * 0.01  # acting costs at least a hundredth of a second a step
+
+
+def test_the_listing_names_an_unfinished_directed_collection_once_per_seed(tmp_path):
+    from eval.jobs import STATE_FILE
+    from eval.pretraining import collection_checkpoint_dir
+
+    part = _part(tmp_path, "table2/sawyer/pretrained_directed")
+    job = next(job for job in part.jobs if job.seed == 1)
+    folder = collection_checkpoint_dir(job)
+    folder.mkdir(parents=True)
+    (folder / STATE_FILE).write_text('{"num_timesteps": 30000}')
+    text = describe_experiments(make_context("paper", str(tmp_path)), [tmp_path])
+    line = next(line for line in text.splitlines() if "table2/sawyer/pretrained_directed " in line)
+    # The EBM and Action FF runs of seed 1 share the dataset: it is named once.
+    assert line.endswith(f"; resumes the directed dataset of seed 1 at 30000/{job.timesteps}")
