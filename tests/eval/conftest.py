@@ -51,3 +51,30 @@ def untrained_sawyer_model(tmp_path) -> Path:
 def untrained_reacher_model(tmp_path) -> Path:
     """A saved, untrained EBM on ``ebm/Reacher-v0`` with a tiny planner (8 samples, 2 iterations)."""
     return _save_untrained_model("ebm/Reacher-v0", tmp_path / "reacher.zip")
+
+
+def _kill_training_after(monkeypatch: pytest.MonkeyPatch, agent: str, transitions: int) -> None:
+    """Make the agent's training step raise once ``transitions`` are consumed, as a killed process would stop.
+
+    :param monkeypatch: the patcher (a ``monkeypatch.context()`` undoes it at the end of its block).
+    :param agent: ``"ebm"`` or ``"action-ff"``.
+    :param transitions: the transitions after which the next training step raises ``RuntimeError("killed")``.
+    """
+    from baselines.action_ff import ActionFFAgent
+    from ebm_agent.agent import EBMPlannerAgent
+
+    agent_class = EBMPlannerAgent if agent == "ebm" else ActionFFAgent
+    original = agent_class._train_on_segments
+
+    def dies_late(self, segments):
+        if self.num_timesteps > transitions:
+            raise RuntimeError("killed")
+        return original(self, segments)
+
+    monkeypatch.setattr(agent_class, "_train_on_segments", dies_late)
+
+
+@pytest.fixture(scope="session")
+def kill_training_after():
+    """``kill_training_after(monkeypatch, agent, transitions)``: a training step that raises past ``transitions``."""
+    return _kill_training_after

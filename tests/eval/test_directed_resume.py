@@ -35,33 +35,19 @@ def _collect(folder, every: int = 25, **kwargs):
     )
 
 
-def _die_after(monkeypatch, transitions: int) -> None:
-    """Make the EBM's training step raise once ``transitions`` are consumed, as a killed process would stop."""
-    from ebm_agent.agent import EBMPlannerAgent
-
-    original = EBMPlannerAgent._train_on_segments
-
-    def dies_late(self, segments):
-        if self.num_timesteps > transitions:
-            raise RuntimeError("killed")
-        return original(self, segments)
-
-    monkeypatch.setattr(EBMPlannerAgent, "_train_on_segments", dies_late)
-
-
 def _same_data(got, want) -> None:
     for name in ("states", "next_states", "actions", "episode_ids"):
         np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
 
 
-def test_a_collection_killed_midway_resumes_to_the_dataset_of_an_uninterrupted_one(tmp_path, monkeypatch):
+def test_a_collection_killed_midway_resumes_to_the_dataset_of_an_uninterrupted_one(tmp_path, monkeypatch, kill_training_after):
     whole = _collect(tmp_path / "whole")
     assert len(whole) == 70 and whole.info["resumed_at"] == []
     assert sorted(path.name for path in (tmp_path / "whole").iterdir()) == ["agent_50.zip", "envs_50.pkl", STATE_FILE]
 
     cut = tmp_path / "cut"
     with monkeypatch.context() as patch:
-        _die_after(patch, 60)
+        kill_training_after(patch, "ebm", 60)
         with pytest.raises(RuntimeError, match="killed"):
             _collect(cut)
     state = json.loads((cut / STATE_FILE).read_text())
@@ -74,10 +60,10 @@ def test_a_collection_killed_midway_resumes_to_the_dataset_of_an_uninterrupted_o
     _same_data(resumed, whole)
 
 
-def test_a_checkpoint_of_another_collection_is_dropped(tmp_path, monkeypatch):
+def test_a_checkpoint_of_another_collection_is_dropped(tmp_path, monkeypatch, kill_training_after):
     folder = tmp_path / "collect"
     with monkeypatch.context() as patch:
-        _die_after(patch, 30)
+        kill_training_after(patch, "ebm", 30)
         with pytest.raises(RuntimeError, match="killed"):
             _collect(folder)
     assert json.loads((folder / STATE_FILE).read_text())["num_timesteps"] == 25
@@ -89,7 +75,7 @@ def test_a_checkpoint_of_another_collection_is_dropped(tmp_path, monkeypatch):
         _collect(folder, every=0)
 
 
-def test_a_job_resumes_its_directed_dataset_and_removes_the_checkpoint_once_saved(tmp_path, monkeypatch):
+def test_a_job_resumes_its_directed_dataset_and_removes_the_checkpoint_once_saved(tmp_path, monkeypatch, kill_training_after):
     job = Job(
         env_id="ebm/Particle-v0",
         agent="ebm",
@@ -105,7 +91,7 @@ def test_a_job_resumes_its_directed_dataset_and_removes_the_checkpoint_once_save
     )
     monkeypatch.setattr("eval.pretraining.COLLECT_CHECKPOINT_EVERY", 25)
     with monkeypatch.context() as patch:
-        _die_after(patch, 30)
+        kill_training_after(patch, "ebm", 30)
         with pytest.raises(RuntimeError, match="killed"):
             load_or_build_dataset(job)
     assert not dataset_path(job).exists()

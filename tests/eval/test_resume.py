@@ -37,29 +37,15 @@ def _job(out_dir, agent: str = "ebm", **overrides) -> Job:
     return Job(**settings)
 
 
-def _kill_after(monkeypatch, agent: str, transitions: int) -> None:
-    """Make the agent's training step raise once ``transitions`` are consumed, as a killed process would stop."""
-    from baselines.action_ff import ActionFFAgent
-    from ebm_agent.agent import EBMPlannerAgent
-
-    agent_class = EBMPlannerAgent if agent == "ebm" else ActionFFAgent
-    original = agent_class._train_on_segments
-
-    def dies_late(self, segments):
-        if self.num_timesteps > transitions:
-            raise RuntimeError("killed")
-        return original(self, segments)
-
-    monkeypatch.setattr(agent_class, "_train_on_segments", dies_late)
-
-
 def _weights(run_dir) -> dict[str, bytes]:
     with zipfile.ZipFile(run_dir / "model.zip") as archive:
         return {name: archive.read(name) for name in archive.namelist() if name.endswith(".pth")}
 
 
 @pytest.mark.parametrize("agent", ["ebm", "action-ff"])
-def test_a_run_killed_mid_learn_resumes_to_the_numbers_of_an_uninterrupted_run(tmp_path, monkeypatch, agent):
+def test_a_run_killed_mid_learn_resumes_to_the_numbers_of_an_uninterrupted_run(
+    tmp_path, monkeypatch, agent, kill_training_after
+):
     whole = run_job(_job(tmp_path / "whole", agent))
     assert whole.ok, whole.error
     assert not (whole.run_dir / RESUME_FOLDER).exists()  # a finished run keeps no checkpoint
@@ -67,7 +53,7 @@ def test_a_run_killed_mid_learn_resumes_to_the_numbers_of_an_uninterrupted_run(t
     # The same job, killed after transition 250: after the evaluation (and checkpoint) at 220.
     job = _job(tmp_path / "cut", agent)
     with monkeypatch.context() as patch:
-        _kill_after(patch, agent, 250)
+        kill_training_after(patch, agent, 250)
         assert run_job(job).status == "failed"
     state = json.loads((job.run_dir / RESUME_FOLDER / STATE_FILE).read_text())
     assert state["num_timesteps"] == 220
@@ -87,8 +73,8 @@ def test_a_run_killed_mid_learn_resumes_to_the_numbers_of_an_uninterrupted_run(t
     assert not (job.run_dir / RESUME_FOLDER).exists()
 
 
-def test_a_checkpoint_of_another_configuration_or_torn_is_dropped(tmp_path, monkeypatch):
-    _kill_after(monkeypatch, "ebm", 150)
+def test_a_checkpoint_of_another_configuration_or_torn_is_dropped(tmp_path, monkeypatch, kill_training_after):
+    kill_training_after(monkeypatch, "ebm", 150)
     job = _job(tmp_path)
     assert run_job(job).status == "failed"
     assert read_run_state(job) is not None
