@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -257,6 +258,8 @@ def seed_result(
     record["wall_time_s"] = time.perf_counter() - start  # a resumed figure adds it to its own time
     with atomic_path(path) as temporary:
         temporary.write_text(json.dumps(record))
+    # One line per seed says that a long figure is alive (a Sawyer exploration seed takes about an hour).
+    print(f"figure {figure}: seed {seed} finished in {record['wall_time_s'] / 60:.1f} min, kept in {path}", file=sys.stderr)
     return dict(result)
 
 

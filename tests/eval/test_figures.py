@@ -205,7 +205,7 @@ def test_figure_result_stores_png_paths_relative_to_its_folder_and_plain_json_nu
     assert loaded.pngs == [tmp_path / "a.png"] and loaded.metrics == {"v": 1.5, "n": 2, "bad": None}
 
 
-def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_path):
+def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_path, capsys):
     from eval.figures_common import SEED_FOLDER, seed_result
 
     calls = []
@@ -215,7 +215,9 @@ def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_pat
         return {"scores": np.array([-1.5, -2.25]), "ok": np.bool_(True)}
 
     first = seed_result(tmp_path, "demo", 3, compute, digest="d1")
+    assert capsys.readouterr().err.startswith("figure demo: seed 3 finished in ")  # a long figure says it is alive
     again = seed_result(tmp_path, "demo", 3, compute, digest="d1")
+    assert capsys.readouterr().err == ""  # read back, not computed
     assert first == again == {"scores": [-1.5, -2.25], "ok": True} and len(calls) == 1
     assert (tmp_path / SEED_FOLDER / "demo_seed3.json").exists()
     seed_result(tmp_path, "demo", 3, compute, digest="other defaults")  # made with other defaults: computed again
