@@ -372,15 +372,19 @@ def _in_progress(part: Part) -> str:
     from eval.provenance import read_json_dict
 
     found: list[str] = []
+    collections: dict[Path, str] = {}  # the EBM and Action FF runs of a seed share one collection
     for job in part.jobs:
         state = read_json_dict(job.run_dir / RESUME_FOLDER / STATE_FILE)
         if state is not None and not (job.run_dir / "metrics.json").exists():
             found.append(f"{job.agent} seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}")
         if job.mode == "pretrained" and job.dataset != "random":
-            state = read_json_dict(collection_checkpoint_dir(job) / STATE_FILE)
-            entry = f"the directed dataset of seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}" if state else ""
-            if entry and entry not in found:  # the EBM and Action FF runs of a seed share it
-                found.append(entry)
+            folder = collection_checkpoint_dir(job)
+            state = read_json_dict(folder / STATE_FILE)
+            if state is not None:
+                collections[folder] = (
+                    f"the directed dataset of seed {job.seed} at {state.get('num_timesteps')}/{job.timesteps}"
+                )
+    found += collections.values()
     return f"; resumes {', '.join(found)}" if found else ""
 
 
