@@ -12,9 +12,12 @@ evaluation; exploration figures by part) and ``evaluate_claims`` reads them thro
   comparison lacks its runs, is "inconclusive" while any comparison is, and holds when every comparison holds.
 - The exploration claim reads the exploration figures' metrics (``eval.figures``) at equal transitions: maze
   coverage of the EBM vs the random agent after the same budget, Sawyer finger occupancy of the EBM at its budget
-  vs each random explorer's occupancy at that same budget, against the strongest random explorer. Keys are
-  slash-joined paths into the nested metrics (``agents/ebm/coverage/mean``). Should those keys be missing, a pair
-  of keys that differ only by ``ebm`` / ``random`` is used instead (spread statistics such as ``std`` excluded).
+  vs each random explorer's occupancy at that same budget, against the strongest random explorer (highest mean).
+  Keys are slash-joined paths into the nested metrics (``agents/ebm/coverage/mean``). Where both numbers have
+  per-seed values beside them (``.../per_seed``), they are judged as scores are: the 95% intervals must separate
+  from 3 seeds on. Otherwise the means alone decide, and the evidence says no interval was computed. Should the
+  keys be missing, a pair of keys that differ only by ``ebm`` / ``random`` is used instead (spread statistics such
+  as ``std`` excluded).
 """
 
 from __future__ import annotations
@@ -177,9 +180,26 @@ def compare_scores(label: str, name: str, scores: Sequence[float], other_name: s
     if len(scores) == 0 or len(other) == 0:
         missing = [n for n, s in ((name, scores), (other_name, other)) if len(s) == 0]
         return Comparison(label, MISSING, f"{' and '.join(missing)} not run yet")
-    first, second = np.asarray(scores, dtype=np.float64), np.asarray(other, dtype=np.float64)
+    return compare_seeds(label, name, scores, other_name, other)
+
+
+def compare_seeds(
+    label: str, name: str, values: Sequence[float], other_name: str, other: Sequence[float], digits: str = ".2f"
+) -> Comparison:
+    """Whether ``values`` are higher than ``other`` on average, beyond the 95% intervals from 3 seeds on.
+
+    :param label: what is compared (an env).
+    :param name: the first side's name.
+    :param values: its per-seed numbers [seeds], not empty (higher is better).
+    :param other_name: the second side's name.
+    :param other: its per-seed numbers, not empty.
+    :param digits: the format of the numbers in the evidence.
+    :return: the comparison: ``HOLDS`` when the intervals separate (or with fewer seeds, when the mean is higher),
+        ``INCONCLUSIVE`` when the mean is higher but the intervals overlap, else ``FAILS``.
+    """
+    first, second = np.asarray(values, dtype=np.float64), np.asarray(other, dtype=np.float64)
     verdict = HOLDS if stats.mean(first) > stats.mean(second) else FAILS
-    evidence = f"{name} {_with_interval(first)} vs {other_name} {_with_interval(second)}"
+    evidence = f"{name} {_with_interval(first, digits)} vs {other_name} {_with_interval(second, digits)}"
     if len(first) >= MIN_SEEDS_FOR_CI and len(second) >= MIN_SEEDS_FOR_CI:
         low_a, high_a = stats.bootstrap_ci(first, stats.mean)
         low_b, high_b = stats.bootstrap_ci(second, stats.mean)
@@ -192,11 +212,11 @@ def compare_scores(label: str, name: str, scores: Sequence[float], other_name: s
     return Comparison(label, verdict, evidence)
 
 
-def _with_interval(values: np.ndarray) -> str:
-    text = f"{stats.mean(values):.2f}"
+def _with_interval(values: np.ndarray, digits: str = ".2f") -> str:
+    text = f"{stats.mean(values):{digits}}"
     if len(values) >= MIN_SEEDS_FOR_CI:
         low, high = stats.bootstrap_ci(values, stats.mean)
-        text += f" [95% CI {low:.2f}, {high:.2f}]"
+        text += f" [95% CI {low:{digits}}, {high:{digits}}]"
     return text + f" ({len(values)} seed{'s' if len(values) != 1 else ''})"
 
 
@@ -305,12 +325,39 @@ def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
         elif pair is None:
             exploration.append(Comparison(label, MISSING, f"figure {part} reports no EBM / random pair of numbers"))
         else:
-            key, ours, partner, theirs = pair
-            verdict = HOLDS if ours > theirs else FAILS
-            exploration.append(Comparison(label, verdict, f"{key} = {ours:.4g} vs {partner} = {theirs:.4g} ({part})"))
+            exploration.append(_exploration_comparison(label, part, metrics, *pair))
     claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
     claims += [_score_claim(spec, scores) for spec in CONTROL_CLAIMS]
     return claims
+
+
+def per_seed_values(metrics: Mapping[str, Any], key: str) -> list[float] | None:
+    """The per-seed values beside a summary number: ``a/b/mean`` -> ``a/b/per_seed``.
+
+    :param metrics: a figure's metrics.
+    :param key: the slash-joined path of a mean.
+    :return: the finite per-seed values, or None when there are none.
+    """
+    folder, _, last = key.rpartition("/")
+    if last != "mean":
+        return None
+    values = _flatten(metrics).get(f"{folder}/per_seed")
+    if not isinstance(values, list) or not values:
+        return None
+    array = np.asarray(values, dtype=np.float64)
+    return array.tolist() if array.ndim == 1 and np.all(np.isfinite(array)) else None
+
+
+def _exploration_comparison(
+    label: str, part: str, metrics: Mapping[str, Any], key: str, ours: float, partner: str, theirs: float
+) -> Comparison:
+    mine, other = per_seed_values(metrics, key), per_seed_values(metrics, partner)
+    if mine is None or other is None:
+        verdict = HOLDS if ours > theirs else FAILS
+        evidence = f"{key} = {ours:.4g} vs {partner} = {theirs:.4g}; no per-seed values, no interval ({part})"
+        return Comparison(label, verdict, evidence)
+    comparison = compare_seeds(label, key, mine, partner, other, digits=".4g")
+    return Comparison(label, comparison.verdict, f"{comparison.evidence} ({part})")
 
 
 def _score_claim(spec: ScoreClaim, scores: ScoreLookup) -> Claim:
@@ -355,8 +402,10 @@ __all__ = [
     "ScoreClaim",
     "combine",
     "compare_scores",
+    "compare_seeds",
     "evaluate_claims",
     "exploration_numbers",
     "exploration_pair",
+    "per_seed_values",
     "render_claims",
 ]

@@ -164,8 +164,8 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
     for name in ("random_uniform", "random_joint_targets"):
         curve = agents[name]["curve"]
         if ebm_budget in curve["timesteps"]:
-            at_budget = [c.curve_values[c.curve_timesteps.index(ebm_budget)] for c in runs[name]]
-            agents[name]["occupancy_at_ebm_budget"] = summary(at_budget)
+            at_budget = [float(c.curve_values[c.curve_timesteps.index(ebm_budget)]) for c in runs[name]]
+            agents[name]["occupancy_at_ebm_budget"] = {**summary(at_budget), "per_seed": at_budget}
         target = agents["ebm"]["occupancy"]["mean"]
         reached = [t for t, v in zip(curve["timesteps"], curve["mean"]) if v >= target]
         agents[name]["transitions_to_reach_ebm_final"] = reached[0] if reached else None
@@ -176,7 +176,8 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
         "normaliser": normaliser,
         "agents": agents,
     }
-    agents["ebm"]["occupancy_at_ebm_budget"] = summary(agents["ebm"]["occupancy"]["per_seed"])
+    ebm_finals = agents["ebm"]["occupancy"]["per_seed"]
+    agents["ebm"]["occupancy_at_ebm_budget"] = {**summary(ebm_finals), "per_seed": ebm_finals}
     title = f"Sawyer finger occupancy / (max random {max_random:.0f} + 5), seeds {seeds}"
     pngs = [_plot_curves(agents, out_dir / "sawyer_occupancy.png", title, log_x=True, scale=100.0 / normaliser)]
     rows = [
@@ -185,7 +186,7 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
             agents[name]["timesteps"],
             f"{agents[name]['occupancy']['mean']:.1f} ± {agents[name]['occupancy']['std']:.1f}",
             agents[name]["normalised_percent"]["mean"],
-            agents[name].get("occupancy_at_ebm_budget", {}).get("mean"),
+            _mean_std(agents[name].get("occupancy_at_ebm_budget")),
         ]
         for name in agents
     ]
@@ -194,6 +195,11 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
     result = FigureResult("sawyer_exploration", pngs, to_jsonable(metrics), markdown_table(header, rows), command)
     result.save(out_dir)
     return result
+
+
+def _mean_std(numbers: dict[str, Any] | None) -> str:
+    """``mean ± std`` of a :func:`summary`, or ``-`` when there is none."""
+    return "-" if numbers is None else f"{numbers['mean']:.1f} ± {numbers['std']:.1f}"
 
 
 def free_cells(bins: int = MAZE_BINS, samples: int = 10) -> np.ndarray:

@@ -129,6 +129,9 @@ def test_sawyer_occupancy_is_normalised_by_the_best_random_run(figures):
             assert record["normalised_percent"]["mean"] < 100.0
             assert record["curve"]["timesteps"][-1] == SMOKE.sawyer_random_timesteps
             assert record["occupancy_at_ebm_budget"]["mean"] <= record["occupancy"]["mean"]
+        at_budget = record["occupancy_at_ebm_budget"]
+        assert len(at_budget["per_seed"]) == len(metrics["seeds"])  # the claim's interval needs them
+        assert at_budget["mean"] == pytest.approx(np.mean(at_budget["per_seed"]))
 
 
 def test_energy_maps_snapshot_both_envs_at_the_checkpoints(figures):

@@ -22,6 +22,7 @@ from eval.claims import (
     evaluate_claims,
     exploration_numbers,
     exploration_pair,
+    per_seed_values,
 )
 from eval.experiments import build_parts, make_context
 from eval.jobs import Job
@@ -226,6 +227,38 @@ def test_exploration_compares_at_equal_budget_against_the_strongest_random_explo
         lambda key: [], {"maze_exploration/maze": maze_metrics, "sawyer_exploration/sawyer": sawyer_metrics}.get
     )
     assert [c.verdict for c in claims[2].comparisons] == [HOLDS, FAILS] and claims[2].verdict == FAILS
+    assert "no interval" in claims[2].comparisons[0].evidence  # 2 seeds a side: the means decide
+    assert "no per-seed values" in claims[2].comparisons[1].evidence
+
+
+def _sawyer_occupancy(ebm: list[float], uniform: list[float]) -> dict:
+    def numbers(values):
+        return {"mean": float(np.mean(values)), "std": float(np.std(values)), "per_seed": values}
+
+    return _agents(
+        ebm={"occupancy": numbers(ebm)},
+        random_uniform={"occupancy": {"mean": 400.0}, "occupancy_at_ebm_budget": numbers(uniform)},
+        random_joint_targets={"occupancy": {"mean": 99.0}, "occupancy_at_ebm_budget": numbers([74.0, 70.0, 78.0, 75.0])},
+    )
+
+
+@pytest.mark.parametrize(
+    ("ebm", "uniform", "verdict"),
+    [
+        ([408.0, 236.0, 365.0, 249.0], [300.0, 296.0, 320.0, 332.0], INCONCLUSIVE),  # a higher mean, wide seeds
+        ([408.0, 396.0, 415.0, 401.0], [300.0, 296.0, 320.0, 332.0], HOLDS),
+        ([208.0, 196.0, 215.0, 201.0], [300.0, 296.0, 320.0, 332.0], FAILS),
+    ],
+)
+def test_exploration_with_per_seed_values_is_judged_by_intervals(ebm, uniform, verdict):
+    metrics = _sawyer_occupancy(ebm, uniform)
+    assert per_seed_values(metrics, "agents/random_uniform/occupancy_at_ebm_budget/mean") == uniform
+    assert per_seed_values(metrics, "agents/random_uniform/occupancy/mean") is None
+    claims = evaluate_claims(lambda key: [], {"sawyer_exploration/sawyer": metrics}.get)
+    comparison = claims[2].comparisons[1]
+    assert comparison.label == "sawyer" and comparison.verdict == verdict
+    assert "agents/random_uniform/occupancy_at_ebm_budget/mean" in comparison.evidence  # the strongest random explorer
+    assert "[95% CI" in comparison.evidence and "(4 seeds)" in comparison.evidence
 
 
 @pytest.mark.parametrize(
