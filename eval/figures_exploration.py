@@ -184,7 +184,7 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
         [
             name,
             agents[name]["timesteps"],
-            f"{agents[name]['occupancy']['mean']:.1f} ± {agents[name]['occupancy']['std']:.1f}",
+            _mean_std(agents[name]["occupancy"]),
             agents[name]["normalised_percent"]["mean"],
             _mean_std(agents[name].get("occupancy_at_ebm_budget")),
         ]

@@ -56,8 +56,8 @@ SEQUENTIAL_DEFAULTS: dict[str, int] = {"epochs": 1, "batch_size": 256, "repeat":
 """The sequential ablation: each transition 100 times in a row (the paper), one pass over the repeated data."""
 
 COLLECT_CHECKPOINT_EVERY = 10_000
-"""Transitions between two checkpoints of a directed collection (on the Sawyer 12-19 min of one core; 18.7 min
-measured on 2026-12-03 beside two other processes)."""
+"""Transitions between two checkpoints of a directed collection (on the Sawyer 12-20 min of one core; 18.7 and about
+20 min measured on 2026-12-03 beside other processes)."""
 
 
 def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:

@@ -22,6 +22,7 @@ import torch
 
 import envs  # noqa: F401  (registers ebm/Particle-v0)
 from baselines.action_ff import ActionFFAgent
+from eval.figures_common import run_episode
 
 START, GOAL = (0.0, 0.0), (0.5, 0.5)
 """The paper's particle start and goal (DESIGN.md)."""
@@ -54,30 +55,19 @@ def plan_spread(agent: ActionFFAgent, state: np.ndarray, goal: np.ndarray, plans
 
 
 def episode(agent: ActionFFAgent, steps: int) -> dict[str, float]:
-    """One deterministic episode from the paper's start to its goal.
+    """One deterministic episode from the paper's start to its goal (``eval.figures_common.run_episode``).
 
     :param agent: a particle Action FF.
     :param steps: the episode's step limit.
     :return: steps taken, real path length, final distance to the goal and success (1.0 or 0.0).
     """
     env = gym.make("ebm/Particle-v0", start=START, goal=GOAL, max_episode_steps=steps)
-    obs, _ = env.reset(seed=0)
-    positions, success, plan_state, start = [obs["observation"].copy()], 0.0, None, np.array([True])
-    for _ in range(steps):
-        # the plan is carried in the recurrent state and followed until the real state drifts from it, as in evaluation
-        action, plan_state = agent.predict(obs, state=plan_state, episode_start=start, deterministic=True)
-        start = np.array([False])
-        obs, _, terminated, truncated, info = env.step(action)
-        positions.append(obs["observation"].copy())
-        success = float(info.get("is_success", 0.0))
-        if terminated or truncated:
-            break
-    path = np.asarray(positions)  # [steps + 1, 2]
+    _score, path, success = run_episode(agent, env, seed=0)  # path: [steps + 1, 2] positions
     return {
         "steps": float(len(path) - 1),
         "path_length": float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()),
         "final_distance": float(np.linalg.norm(path[-1] - np.asarray(GOAL))),
-        "success": success,
+        "success": float(success),
     }
 
 
