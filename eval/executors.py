@@ -8,7 +8,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
+import os
+import signal
 import traceback
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
@@ -36,10 +39,27 @@ class Executor(Protocol):
 
 
 def _limit_threads(threads: int) -> None:
-    """Pool initializer: one torch thread per worker, so that ``--jobs`` workers do not fight over the cores."""
+    """One torch thread per worker, so that ``--jobs`` workers do not fight over the cores."""
     import torch
 
     torch.set_num_threads(threads)
+
+
+def _start_worker(threads: int) -> None:
+    """Pool initializer: limit torch's threads, and remember stop signals rather than die of them (``eval.stop``)."""
+    from eval.stop import install_worker_handlers
+
+    _limit_threads(threads)
+    install_worker_handlers()
+
+
+def _pool_job(runner: Runner, job: Job) -> JobResult:
+    """Run ``job`` in a pool worker, unless the worker has received a stop signal."""
+    from eval.stop import stop_received
+
+    if stop_received() is not None:
+        return _not_started(job)
+    return runner(job)
 
 
 class LocalExecutor:
@@ -77,7 +97,13 @@ class LocalExecutor:
             if self.jobs == 1:
                 if self.threads_per_job is not None:
                     _limit_threads(self.threads_per_job)
-                return [self._run_in_process(job, bar) for job in jobs]
+                results: list[JobResult] = []
+                for job in jobs:
+                    if any(result.status == "stopped" for result in results):  # a signal stopped the sweep
+                        results.append(_not_started(job))
+                    else:
+                        results.append(self._run_in_process(job, bar))
+                return results
             return self._run_in_pool(jobs, bar)
 
     def _run_in_process(self, job: Job, bar: Any) -> JobResult:
@@ -90,23 +116,46 @@ class LocalExecutor:
         return result
 
     def _run_in_pool(self, jobs: list[Job], bar: Any) -> list[JobResult]:
+        from eval.stop import stop_at_next_step
+
         # spawn, not fork: torch and MuJoCo state must not be copied into children mid-flight.
         context = multiprocessing.get_context("spawn")
         results: list[JobResult | None] = [None] * len(jobs)
         workers = min(self.jobs, len(jobs))
         with ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_limit_threads, initargs=(self.threads_per_job or 1,)
+            workers, mp_context=context, initializer=_start_worker, initargs=(self.threads_per_job or 1,)
         ) as pool:
-            futures: dict[Future[JobResult], int] = {pool.submit(self.runner, job): i for i, job in enumerate(jobs)}
-            for future in as_completed(futures):
-                index = futures[future]
-                try:
-                    results[index] = future.result()
-                except Exception:  # the worker died or the job could not be pickled
-                    results[index] = JobResult(job=jobs[index], status="failed", error=traceback.format_exc())
-                bar.set_postfix_str(_describe(jobs[index]))
-                bar.update(1)
+            futures: dict[Future[JobResult], int] = {pool.submit(_pool_job, self.runner, job): i for i, job in enumerate(jobs)}
+
+            def stop_workers() -> None:
+                # SIGTERM or Ctrl-C to this process: no new job starts, and the running ones are asked to stop
+                # (inside learn, each writes its checkpoint at its next step; elsewhere, it finishes its job).
+                # A Ctrl-C in a terminal reaches the workers directly too.
+                for future in futures:
+                    future.cancel()
+                for process in multiprocessing.active_children():
+                    if process.pid is not None:
+                        with contextlib.suppress(ProcessLookupError):
+                            os.kill(process.pid, signal.SIGTERM)
+
+            with stop_at_next_step(on_request=stop_workers, quiet=True):
+                for future in as_completed(futures):
+                    index = futures[future]
+                    if future.cancelled():
+                        results[index] = _not_started(jobs[index])
+                        continue
+                    try:
+                        results[index] = future.result()
+                    except Exception:  # the worker died or the job could not be pickled
+                        results[index] = JobResult(job=jobs[index], status="failed", error=traceback.format_exc())
+                    bar.set_postfix_str(_describe(jobs[index]))
+                    bar.update(1)
         return [result for result in results if result is not None]
+
+
+def _not_started(job: Job) -> JobResult:
+    """The result of a job a signal kept from starting: stopped, with nothing to resume yet."""
+    return JobResult(job=job, status="stopped", error="not started: the sweep was stopped by a signal; run it again")
 
 
 def _describe(job: Job) -> str:

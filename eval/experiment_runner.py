@@ -160,10 +160,13 @@ def run_parts(
             result.run_dir, command, parts=part_of.get(result.run_dir, []), scale=parts[0].scale, status=result.status
         )
         if not result.ok:
-            log(f"failed {result.run_dir}: {(result.error or '').strip().splitlines()[-1:]}")
-    for part in parts:
-        if part.figure is not None:
-            _run_figure(part, command, summary, log)
+            log(f"{result.status} {result.run_dir}: {(result.error or '').strip().splitlines()[-1:]}")
+    if any(result.status == "stopped" for result in summary.ran):  # SIGTERM or Ctrl-C (eval.stop)
+        log("ebm-eval: stopped by a signal, the figures of this command not started: run it again to resume")
+    else:
+        for part in parts:
+            if part.figure is not None:
+                _run_figure(part, command, summary, log)
     append_session(
         out_dir,
         {

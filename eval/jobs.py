@@ -24,6 +24,7 @@ TensorBoard events go to ``<out>[/<variant>]/tb/<env_short>/<agent>_s<seed>_1/``
 
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import time
@@ -152,7 +153,7 @@ class JobResult:
     """What a job produced; plain Python values only, so it pickles across processes.
 
     :param job: the job.
-    :param status: "ok" or "failed".
+    :param status: "ok", "failed", or "stopped" (a signal stopped it after writing its checkpoint: run it again).
     :param timesteps: transitions the agent really consumed (``model.num_timesteps``).
     :param score_mean: mean final evaluation score.
     :param score_std: population std of the final evaluation scores over episodes.
@@ -160,7 +161,7 @@ class JobResult:
     :param episode_lengths: each final evaluation episode's length.
     :param success_rate: fraction of successful final evaluation episodes, None if the env does not say.
     :param wall_time_s: wall time of the whole job.
-    :param error: the traceback when the job failed.
+    :param error: the traceback when the job failed; for a stopped one, where it stopped and its checkpoint.
     """
 
     job: Job
@@ -228,12 +229,15 @@ def run_job(job: Job) -> JobResult:
     """Train one agent on one env for exactly its budget, evaluate it, and write its run folder.
 
     Never raises for a failure inside the run: the error comes back as a failed ``JobResult`` (and in
-    ``error.txt``) so that a sweep keeps its other runs.
+    ``error.txt``) so that a sweep keeps its other runs. A planning agent's online run (or directed collection)
+    that receives SIGTERM or Ctrl-C during ``learn`` writes its checkpoint and comes back ``"stopped"``
+    (``eval.stop``); the next ``run_job`` of the same job resumes it.
 
     :param job: the run.
     :return: the result.
     """
     from eval.provenance import job_fingerprint
+    from eval.stop import RunStopped
 
     start = time.perf_counter()
     run_dir = job.run_dir
@@ -248,6 +252,8 @@ def run_job(job: Job) -> JobResult:
         config = {**to_plain(asdict(job)), "fingerprint": job_fingerprint(job), "versions": library_versions()}
         (run_dir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         return _train_and_evaluate(job, start)
+    except RunStopped as stop:  # SIGTERM or Ctrl-C: its checkpoint is written, the next call resumes it
+        return JobResult(job=job, status="stopped", wall_time_s=time.perf_counter() - start, error=str(stop))
     except Exception:  # a failed run must not end the sweep
         error = traceback.format_exc()
         try:
@@ -456,16 +462,16 @@ def _learn_online(
 
     from eval.evaluation import EvaluationLine, last_evaluation
     from eval.resume import RunCheckpoint, resumable
+    from eval.stop import CheckpointOnStop, raise_if_stopped, stop_at_next_step
 
     after_eval: list[BaseCallback] = []
     if not job.progress_bar:  # one line per evaluation says that a long run is alive and how far it is
         after_eval.append(EvaluationLine(str(job.run_dir), job.timesteps))
+    checkpoint: RunCheckpoint | None = None
     if resumable(model, job):
-        after_eval.append(
-            RunCheckpoint(job, *((resume.learn_time_s, [*resume.resumed_at, resume.num_timesteps]) if resume else ()))
-        )
-    # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each. A resumed run's calls
-    # count from its checkpoint, which was taken at an evaluation, so the later evaluations fall where they would.
+        checkpoint = RunCheckpoint(job, *((resume.learn_time_s, [*resume.resumed_at, resume.num_timesteps]) if resume else ()))
+        after_eval.append(checkpoint)
+    # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
     eval_callback = EvalCallback(
         eval_env,
         n_eval_episodes=job.eval_episodes,
@@ -478,14 +484,25 @@ def _learn_online(
     )
     if resume is not None:
         resume.refill(eval_callback)
+        # A resumed run's calls count from its checkpoint (taken at an evaluation, or wherever a stop was asked
+        # for), so that the later evaluations fall where an uninterrupted run's would.
+        eval_callback.n_calls = resume.num_timesteps // model.n_envs
     extra = callbacks(job.timesteps) if callbacks is not None else []
-    model.learn(
+    learn = functools.partial(
+        model.learn,
         total_timesteps=job.timesteps - (resume.num_timesteps if resume is not None else 0),
-        callback=CallbackList([*extra, eval_callback]),
         tb_log_name=job.tb_log_name,
         reset_num_timesteps=resume is None,
         progress_bar=job.progress_bar,
     )
+    if checkpoint is None:  # not resumable (PPO's minutes-long runs): signals keep their usual effect
+        learn(callback=CallbackList([*extra, eval_callback]))
+    else:
+        run_checkpoint = checkpoint
+        with stop_at_next_step() as flag:
+            on_stop = CheckpointOnStop(flag, lambda: run_checkpoint.save(eval_callback), lambda: run_checkpoint.saved_at)
+            learn(callback=CallbackList([*extra, eval_callback, on_stop]))
+        raise_if_stopped(flag, int(model.num_timesteps), job.timesteps, f"run {job.run_dir}", job.run_dir / RESUME_FOLDER)
     timesteps = int(model.num_timesteps)
     # An evaluation EvalCallback just ran at the final step is the final evaluation (same call, same env):
     # reuse it rather than pay for the episodes twice, which for a planner costs as much as learning.

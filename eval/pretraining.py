@@ -25,12 +25,14 @@ A directed collection is an online run without evaluations: 100,000 Sawyer trans
 core, so it keeps a checkpoint every ``COLLECT_CHECKPOINT_EVERY`` transitions in ``<cache file>.collect/`` (the agent's
 ``save_checkpoint``, the env with its recorder, the time spent; ``eval.resume.write_checkpoint_files``). The next job
 that needs the dataset goes on from there, and the dataset equals an uninterrupted collection's (tested); the folder
-is removed once the dataset is saved.
+is removed once the dataset is saved. SIGTERM or Ctrl-C during the collection writes a checkpoint at the next step
+and stops it (``eval.stop``), so that nothing collected is lost.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import shutil
@@ -45,6 +47,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 from eval.jobs import Job, to_plain
+from eval.stop import CheckpointOnStop, raise_if_stopped, stop_at_next_step
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -220,12 +223,18 @@ def collect_directed_transitions(
             checkpoint_dir, checkpoint_every, num_transitions, recorder, identity, time_before, resumed_at
         )
     start = time.perf_counter()
+    learn = functools.partial(
+        agent.learn, total_timesteps=num_transitions - int(agent.num_timesteps), reset_num_timesteps=found is None
+    )
     try:
-        agent.learn(
-            total_timesteps=num_transitions - int(agent.num_timesteps),
-            callback=checkpoint,
-            reset_num_timesteps=found is None,
-        )
+        if checkpoint is None:
+            learn()
+        else:
+            collection = checkpoint
+            with stop_at_next_step() as flag:  # SIGTERM, Ctrl-C: a checkpoint at the next step, then stop
+                learn(callback=[collection, CheckpointOnStop(flag, collection.save, lambda: collection.saved_at)])
+            what = f"directed collection of {num_transitions:,} {env_id} transitions (seed {seed})"
+            raise_if_stopped(flag, int(agent.num_timesteps), num_transitions, what, checkpoint_dir)
     finally:
         vec_env.close()
     info = {
@@ -266,6 +275,7 @@ class CollectionCheckpoint(BaseCallback):
         self.folder, self.every, self.total = Path(folder), int(every), int(total)
         self.recorder, self.identity = recorder, dict(identity)
         self.time_before, self.resumed_at = float(time_before), list(resumed_at or [])
+        self.saved_at: int | None = None
         self._start = time.perf_counter()
         self._next = self.every
 
@@ -274,15 +284,24 @@ class CollectionCheckpoint(BaseCallback):
         self._next = (self.num_timesteps // self.every + 1) * self.every
 
     def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            self.save()
+        return True
+
+    def save(self) -> None:
+        """Write the checkpoint at the agent's current step (nothing once the collection is complete).
+
+        Called every ``every`` transitions, and by ``eval.stop.CheckpointOnStop`` where a stop was asked for.
+        """
         from eval.resume import write_checkpoint_files
 
-        steps = self.num_timesteps
-        if self._next <= steps < self.total:
+        steps = int(self.model.num_timesteps)
+        if steps < self.total:
             spent = self.time_before + time.perf_counter() - self._start
             state = {**self.identity, "collect_time_s": spent, "resumed_at": self.resumed_at}
             write_checkpoint_files(self.folder, self.model, {"env": self.model.get_env(), "recorder": self.recorder}, state)
-            self._next = (steps // self.every + 1) * self.every
-        return True
+            self.saved_at = steps
+        self._next = (steps // self.every + 1) * self.every
 
 
 class TransitionRecorder(gym.Wrapper):

@@ -230,8 +230,12 @@ def render_markdown(
         parts += ["", "## Sanity anchors", "", anchors_table(anchors)]
     failed = [r for r in results if not r.ok]
     if failed:
-        parts += ["", "## Failed runs", ""]
-        parts += [f"- {r.job.env_short} / {r.job.agent} / seed {r.job.seed}: {_last_line(r.error)}" for r in failed]
+        parts += ["", "## Unfinished runs (failed, or stopped by a signal: run the command again)", ""]
+        parts += [
+            f"- {r.job.env_short} / {r.job.agent} / seed {r.job.seed}: {'stopped: ' * (r.status == 'stopped')}"
+            f"{_last_line(r.error)}"
+            for r in failed
+        ]
     if command:
         parts += ["", "## Command", "", "```", shlex.join(command), "```"]
     return "\n".join(parts) + "\n"

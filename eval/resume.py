@@ -14,8 +14,10 @@ short (a session's end, a killed process) started again from zero. After each of
 Each file is written atomically and ``state.json`` names the pair, so a kill at any moment leaves the previous
 checkpoint whole. :func:`read_run_state` accepts a checkpoint only for the same fingerprint and digest; the
 resumed run (``EvalCallback`` refilled with the curve so far) then consumes the rest of the budget, and its
-``metrics.json`` lists where it resumed (``resumed_at``). Same seed, same numbers: a resumed run's weights, curve
-and final scores equal an uninterrupted run's (tested). The folder is removed once the run is finished.
+``metrics.json`` lists where it resumed (``resumed_at``). SIGTERM or Ctrl-C during ``learn`` writes the same
+checkpoint at the next env step and stops the run (``eval.stop``), so a stopped run loses no transitions. Same
+seed, same numbers: a resumed run's weights, curve and final scores equal an uninterrupted run's (tested), wherever
+it stopped. The folder is removed once the run is finished.
 
 Like ``load``, reading the checkpoint unpickles: it is meant for a run folder this machine wrote.
 """
@@ -124,6 +126,7 @@ class RunCheckpoint(BaseCallback):
         self.job = job
         self.learn_time_before = float(learn_time_s)
         self.resumed_at = list(resumed_at or [])
+        self.saved_at: int | None = None
         self._start = time.perf_counter()
 
     def _init_callback(self) -> None:
@@ -131,10 +134,22 @@ class RunCheckpoint(BaseCallback):
 
     def _on_step(self) -> bool:
         parent = self.parent
-        if isinstance(parent, EvalCallback) and self.num_timesteps < self.job.timesteps:
-            learn_time = self.learn_time_before + time.perf_counter() - self._start
-            write_run_state(self.job, self.model, parent, learn_time, self.resumed_at)
+        if isinstance(parent, EvalCallback):
+            self.save(parent)
         return True
+
+    def save(self, callback: EvalCallback) -> None:
+        """Write the run's checkpoint at the model's current step (nothing at the end of the budget).
+
+        Called after each evaluation, and by ``eval.stop.CheckpointOnStop`` at the step where a stop was asked for.
+
+        :param callback: the run's ``EvalCallback`` (its eval env and the curve so far).
+        """
+        steps = int(self.model.num_timesteps)
+        if steps < self.job.timesteps:
+            learn_time = self.learn_time_before + time.perf_counter() - self._start
+            write_run_state(self.job, self.model, callback, learn_time, self.resumed_at)
+            self.saved_at = steps
 
 
 def write_run_state(job: Job, model: Any, callback: EvalCallback, learn_time_s: float, resumed_at: list[int]) -> Path:

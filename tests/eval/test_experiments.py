@@ -291,6 +291,30 @@ def test_a_figure_part_runs_once_through_eval_figures(tmp_path, monkeypatch):
     assert again.figures_skipped == ["plan_diversity/particle"] and len(calls) == 1
 
 
+class StoppedExecutor(FakeExecutor):
+    """Every run comes back stopped, as after SIGTERM (``eval.stop``)."""
+
+    def map(self, jobs, progress=True):
+        self.ran.extend(jobs)
+        return [JobResult(job=job, status="stopped", error="run x stopped by SIGTERM at 7/10 transitions") for job in jobs]
+
+
+def test_a_stopped_run_is_recorded_stopped_and_no_figure_starts(tmp_path, monkeypatch):
+    calls = []
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: calls.append)
+    context = make_context("smoke", str(tmp_path))
+    parts = [
+        *select_parts(build_parts(["table1"], context), ["table1/particle/online"]),
+        *build_parts(["plan_diversity"], context),
+    ]
+    messages: list[str] = []
+    summary = run_parts(parts, StoppedExecutor(), "ebm-eval stopped", progress=False, log=messages.append)
+    assert not summary.ok and calls == [] and not summary.figures_ran
+    assert read_provenance(parts[0].jobs[0].run_dir)["status"] == "stopped"
+    assert any(m.startswith("stopped ") and "SIGTERM at 7/10" in m for m in messages)
+    assert any("figures of this command not started" in m for m in messages)
+
+
 def test_a_failing_figure_is_reported_not_raised(tmp_path, monkeypatch):
     def broken(out_dir, *, seeds, scale):
         raise RuntimeError("no figure today")

@@ -1,0 +1,170 @@
+"""Stopping a long run cleanly: SIGTERM or Ctrl-C during ``learn`` writes a checkpoint at the next env step.
+
+A Sawyer run or directed collection keeps a checkpoint every 10,000 transitions (``eval.resume``,
+``eval.pretraining``), 20 to 30 minutes of one core apart. A process killed between two of them loses that work.
+Inside :func:`stop_at_next_step`, SIGTERM (what ``kill``, a batch scheduler's preemption or a session's end sends)
+and a first Ctrl-C (SIGINT) do not end the process: they set a flag. The run's :class:`CheckpointOnStop` callback
+sees it after the current env step (a step ends within a second; an evaluation in progress is finished first),
+writes the same checkpoint the run writes after an evaluation, and stops ``learn``. The job then ends with status
+``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from that step. A second Ctrl-C
+stops at once (``KeyboardInterrupt``), leaving the last periodic checkpoint.
+
+Outside the block (building envs, offline training, final evaluations, figures) the signals keep their usual
+effect. Handlers can be set only in a process's main thread; elsewhere (a Ray worker's task thread) the block does
+nothing and the signals keep their usual effect too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any
+
+from stable_baselines3.common.callbacks import BaseCallback
+
+STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT)
+"""The signals that ask for a checkpoint and a stop."""
+
+
+class RunStopped(Exception):
+    """A run (or a directed collection) stopped at a signal after writing its checkpoint; run it again to resume."""
+
+
+@dataclass
+class StopFlag:
+    """Set by the handlers of :func:`stop_at_next_step` when a stop is asked for.
+
+    :param signal_name: the signal received first ("SIGTERM", "SIGINT"), None while none was.
+    """
+
+    signal_name: str | None = None
+
+    @property
+    def requested(self) -> bool:
+        """Whether a stop was asked for."""
+        return self.signal_name is not None
+
+
+_received: list[str] = []
+"""The signals this process's handlers received, first first."""
+
+_worker = False
+"""Whether this process is a pool worker (:func:`install_worker_handlers`)."""
+
+
+def _handler(flag: StopFlag, on_request: Callable[[], None] | None, message: str | None) -> Callable[[int, Any], None]:
+    """A signal handler that sets ``flag`` on the first signal and raises ``KeyboardInterrupt`` on a second SIGINT."""
+
+    def handler(signum: int, frame: Any) -> None:
+        name = signal.Signals(signum).name
+        _received.append(name)
+        if flag.requested:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            return
+        flag.signal_name = name
+        if message:
+            print(f"ebm-eval: {name} received: {message}", file=sys.stderr, flush=True)
+        if on_request is not None:
+            on_request()
+
+    return handler
+
+
+def stop_received() -> str | None:
+    """The first stop signal this process's handlers received (None: none): a pool worker starts no job after one."""
+    return _received[0] if _received else None
+
+
+def install_worker_handlers() -> None:
+    """For a pool worker, at its start: SIGTERM and a first SIGINT are remembered rather than ending the process.
+
+    The job in progress goes on (inside ``learn`` it writes its checkpoint at the next step and stops;
+    :func:`stop_at_next_step` sees a signal received before ``learn`` started), and the worker starts no further
+    job (``stop_received``). A second SIGINT raises ``KeyboardInterrupt``.
+    """
+    global _worker
+    _worker = True
+    handler = _handler(StopFlag(), None, None)
+    for signum in STOP_SIGNALS:
+        signal.signal(signum, handler)
+
+
+@contextlib.contextmanager
+def stop_at_next_step(on_request: Callable[[], None] | None = None, quiet: bool = False) -> Iterator[StopFlag]:
+    """Within the block, SIGTERM and a first SIGINT set the yielded flag instead of ending the process.
+
+    A second SIGINT raises ``KeyboardInterrupt``; further SIGTERMs are ignored. The handlers in place before the
+    block are put back at its end. In a thread other than the main one, no handler is set and the flag stays unset.
+    In a pool worker that already received a stop signal, the flag is set from the start.
+
+    :param on_request: called once, from the handler, when the first signal arrives (e.g. to pass it on to worker
+        processes).
+    :param quiet: print nothing when a signal arrives (by default one line on stderr says what happens).
+    :return: the flag (a context manager yielding it).
+    """
+    flag = StopFlag(signal_name=stop_received() if _worker else None)
+    if threading.current_thread() is not threading.main_thread():
+        yield flag
+        return
+    message = (
+        None
+        if quiet
+        else (
+            "writing a checkpoint after the current step, then stopping (run the same command again to resume; "
+            "Ctrl-C again to stop at once)"
+        )
+    )
+    handler = _handler(flag, on_request, message)
+    previous = {signum: signal.signal(signum, handler) for signum in STOP_SIGNALS}
+    try:
+        yield flag
+    finally:
+        for signum, old in previous.items():
+            signal.signal(signum, old)
+
+
+class CheckpointOnStop(BaseCallback):
+    """Once ``flag`` is set: call ``save`` (which writes the run's checkpoint) and stop ``learn``.
+
+    Place it after the callbacks that may write a checkpoint of their own at the same step (``EvalCallback`` with
+    ``RunCheckpoint``); ``save`` is not called twice for one step.
+
+    :param flag: the flag of :func:`stop_at_next_step`.
+    :param save: writes the checkpoint at the model's current step.
+    :param saved_step: returns the step of the checkpoint on disk (None: none), to skip a second write.
+    """
+
+    def __init__(self, flag: StopFlag, save: Callable[[], object], saved_step: Callable[[], int | None] | None = None) -> None:
+        super().__init__()
+        self.flag, self.save, self.saved_step = flag, save, saved_step
+        self.stopped_at: int | None = None
+
+    def _on_step(self) -> bool:
+        if not self.flag.requested:
+            return True
+        if self.saved_step is None or self.saved_step() != self.num_timesteps:
+            self.save()
+        self.stopped_at = self.num_timesteps
+        return False
+
+
+def raise_if_stopped(flag: StopFlag, done: int, total: int, what: str, where: object) -> None:
+    """Raise :class:`RunStopped` when ``learn`` returned early because of ``flag``.
+
+    :param flag: the flag of :func:`stop_at_next_step`.
+    :param done: transitions consumed.
+    :param total: the budget.
+    :param what: the run, in words ("run ...", "directed collection ...").
+    :param where: the checkpoint folder.
+    :raises RunStopped: when a stop was asked for before the budget was consumed.
+    """
+    if flag.requested and done < total:
+        raise RunStopped(
+            f"{what} stopped by {flag.signal_name} at {done:,}/{total:,} transitions; its checkpoint is in {where}/: "
+            "run the same command again to resume"
+        )
