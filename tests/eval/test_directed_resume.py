@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from eval.pretraining import (
     load_or_build_dataset,
 )
 from eval.resume import STATE_FILE
+from eval.stop import RunStopped
 
 pytest.importorskip("envs.particle")
 
@@ -101,3 +103,18 @@ def test_a_job_resumes_its_directed_dataset_and_removes_the_checkpoint_once_save
     assert path == dataset_path(job) and path.exists() and len(dataset) == 40
     assert dataset.info["resumed_at"] == [25] and dataset.info["policy"] == "directed"
     assert not collection_checkpoint_dir(job).exists()  # saved: the checkpoint is spent
+
+
+def test_a_collection_stopped_by_ctrl_c_checkpoints_that_step_and_resumes_to_the_same_dataset(
+    tmp_path, monkeypatch, signal_training_after
+):
+    whole = _collect(tmp_path / "whole", every=50)
+    with monkeypatch.context() as patch:
+        signal_training_after(patch, "ebm", 30, signal.SIGINT)
+        with pytest.raises(RunStopped, match=r"of 70 ebm/Particle-v0 transitions \(seed 3\) stopped by SIGINT at"):
+            _collect(tmp_path / "cut", every=50)
+    step = json.loads((tmp_path / "cut" / STATE_FILE).read_text())["num_timesteps"]
+    assert 30 < step < 40  # the step where the signal came (no periodic checkpoint before 50)
+    resumed = _collect(tmp_path / "cut", every=50)
+    assert resumed.info["resumed_at"] == [step]
+    _same_data(resumed, whole)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import signal
 import zipfile
 
 import numpy as np
@@ -86,3 +87,33 @@ def test_a_checkpoint_of_another_configuration_or_torn_is_dropped(tmp_path, monk
     assert run_job(job).status == "failed"
     (job.run_dir / RESUME_FOLDER / "envs_110.pkl").write_bytes(b"torn")
     assert read_run_state(job) is None
+
+
+def test_sigterm_mid_run_checkpoints_that_step_and_the_rerun_ends_as_an_uninterrupted_run(
+    tmp_path, monkeypatch, signal_training_after
+):
+    whole = run_job(_job(tmp_path / "whole"))
+    assert whole.ok, whole.error
+
+    job = _job(tmp_path / "cut")
+    with monkeypatch.context() as patch:
+        signal_training_after(patch, "ebm", 150, signal.SIGTERM)
+        stopped = run_job(job)
+    assert stopped.status == "stopped" and not stopped.ok
+    assert "stopped by SIGTERM at" in stopped.error and "run the same command again to resume" in stopped.error
+    assert not (job.run_dir / "error.txt").exists() and not (job.run_dir / "metrics.json").exists()
+    step = json.loads((job.run_dir / RESUME_FOLDER / STATE_FILE).read_text())["num_timesteps"]
+    assert 150 < step < 160 and step % 110  # the step where the signal came, not the last evaluation's (110)
+    assert f"at {step}/300 transitions" in stopped.error
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the handler is gone with the learn call
+
+    resumed = run_job(job)
+    assert resumed.ok, resumed.error
+    metrics = json.loads((job.run_dir / "metrics.json").read_text())
+    reference = json.loads((whole.run_dir / "metrics.json").read_text())
+    assert metrics["resumed_at"] == [step]
+    assert metrics["episode_scores"] == reference["episode_scores"]
+    with np.load(job.run_dir / "evaluations.npz") as got, np.load(whole.run_dir / "evaluations.npz") as want:
+        np.testing.assert_array_equal(got["timesteps"], [110, 220, 300])  # the evaluation after the stop falls at 220
+        np.testing.assert_array_equal(got["results"], want["results"])
+    assert _weights(job.run_dir) == _weights(whole.run_dir)
