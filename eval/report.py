@@ -49,6 +49,7 @@ class AgentSummary:
     :param agent: agent name.
     :param seeds: seeds that finished.
     :param failed: seeds that failed.
+    :param stopped: seeds that a signal stopped before they finished (``eval.stop``; their checkpoint resumes them).
     :param seed_mean: mean over seeds of the per-seed mean scores.
     :param seed_std: population std over seeds of the per-seed mean scores.
     :param episode_mean: mean over all evaluation episodes of all seeds.
@@ -64,6 +65,7 @@ class AgentSummary:
     agent: str
     seeds: tuple[int, ...]
     failed: tuple[int, ...]
+    stopped: tuple[int, ...]
     seed_mean: float | None
     seed_std: float | None
     episode_mean: float | None
@@ -98,7 +100,8 @@ def summarize(results: Sequence[JobResult], bootstrap_reps: int = 2000, seed: in
                 env=env,
                 agent=agent,
                 seeds=tuple(r.job.seed for r in finished),
-                failed=tuple(r.job.seed for r in group if not r.ok),
+                failed=tuple(r.job.seed for r in group if r.status not in ("ok", "stopped")),
+                stopped=tuple(r.job.seed for r in group if r.status == "stopped"),
                 seed_mean=stats.mean(per_seed) if finished else None,
                 seed_std=stats.std(per_seed) if finished else None,
                 episode_mean=stats.mean(episodes) if len(episodes) else None,
@@ -171,7 +174,8 @@ def results_table(summaries: Sequence[AgentSummary]) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for s in summaries:
-        seeds = str(len(s.seeds)) + (f" ({len(s.failed)} failed)" if s.failed else "")
+        unfinished = [f"{len(s.failed)} failed"] * bool(s.failed) + [f"{len(s.stopped)} stopped"] * bool(s.stopped)
+        seeds = str(len(s.seeds)) + (f" ({', '.join(unfinished)})" if unfinished else "")
         iqm = "-" if s.iqm is None or s.iqm_ci is None else f"{s.iqm:.2f} [{s.iqm_ci[0]:.2f}, {s.iqm_ci[1]:.2f}]"
         if s.steps_used is None:
             steps = f"- / {s.budget}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -103,6 +104,15 @@ def test_markdown_table_anchors_failures_and_command(results, tmp_path):
 def test_markdown_of_only_failed_runs_does_not_crash(tmp_path):
     text = render_markdown([_failed(tmp_path, "ebm", 0)])
     assert "| particle | ebm | 0 (1 failed) | - |" in text
+
+
+def test_a_stopped_run_is_counted_apart_from_the_failed_ones(tmp_path):
+    stopped = dataclasses.replace(_failed(tmp_path, "ebm", 1), status="stopped", error="run x stopped by SIGTERM at 5/10")
+    (summary,) = summarize([_failed(tmp_path, "ebm", 0), stopped])
+    assert (summary.failed, summary.stopped) == ((0,), (1,))
+    text = render_markdown([_failed(tmp_path, "ebm", 0), stopped])
+    assert "| particle | ebm | 0 (1 failed, 1 stopped) | - |" in text
+    assert "ebm / seed 1: stopped: run x stopped by SIGTERM at 5/10" in text
 
 
 def _write_npz(result: JobResult, timesteps, results) -> None:
