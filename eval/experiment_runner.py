@@ -178,7 +178,9 @@ def run_parts(
             "parts": [part.name for part in parts],
             "ran": [str(r.run_dir) for r in summary.ran if r.ok] + summary.figures_ran,
             "skipped": [str(r.run_dir) for r in summary.skipped] + summary.figures_skipped,
-            "failed": [str(r.run_dir) for r in summary.ran if not r.ok] + sorted(summary.figures_failed),
+            "failed": [str(r.run_dir) for r in summary.ran if r.status not in ("ok", "stopped")]
+            + sorted(summary.figures_failed),
+            "stopped": [str(r.run_dir) for r in summary.ran if r.status == "stopped"],
         },
     )
     return summary

@@ -446,14 +446,15 @@ def _sessions_md(out_dir: Path) -> list[str]:
     lines = [
         "## Sessions",
         "",
-        "| started | command | machine | wall time | ran | skipped | failed |",
-        "|---|---|---|---|---|---|---|",
+        "| started | command | machine | wall time | ran | skipped | failed | stopped |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for record in sessions:
+        counts = " | ".join(str(len(record.get(key, []))) for key in ("ran", "skipped", "failed", "stopped"))
         lines.append(
             f"| {str(record.get('started', ''))[:16]} | `{record.get('command', '')}` | "
             f"{describe_machine(record.get('machine'))} | {format_duration(float(record.get('wall_time_s', 0.0)))} | "
-            f"{len(record.get('ran', []))} | {len(record.get('skipped', []))} | {len(record.get('failed', []))} |"
+            f"{counts} |"
         )
     return [*lines, ""]
 

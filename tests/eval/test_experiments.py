@@ -313,6 +313,8 @@ def test_a_stopped_run_is_recorded_stopped_and_no_figure_starts(tmp_path, monkey
     assert read_provenance(parts[0].jobs[0].run_dir)["status"] == "stopped"
     assert any(m.startswith("stopped ") and "SIGTERM at 7/10" in m for m in messages)
     assert any("figures of this command not started" in m for m in messages)
+    session = read_sessions(tmp_path)[-1]
+    assert session["stopped"] == [str(job.run_dir) for job in parts[0].jobs] and session["failed"] == []
 
 
 def test_a_failing_figure_is_reported_not_raised(tmp_path, monkeypatch):

@@ -98,6 +98,7 @@ def test_the_document_puts_our_numbers_beside_the_papers(results):
     assert (docs.parent / "figures" / "table1_particle_online_learning_curves.png").exists()
     assert "figures/table1_particle_online_learning_curves.png" in text
     assert "## Sessions" in text and "`ebm-eval --experiment table1`" in text
+    assert "| ran | skipped | failed | stopped |" in text and text.count("| 0 | 0 | 0 | 0 |") == 1
     assert "- particle: holds (EBM -21.00 [95% CI" in text
 
 
