@@ -281,7 +281,9 @@ class CollectionCheckpoint(BaseCallback):
 
     def _init_callback(self) -> None:
         self._start = time.perf_counter()
-        self._next = (self.num_timesteps // self.every + 1) * self.every
+        # The model's count: the callback's own is 0 until its first step, which for a resumed collection would
+        # write a needless checkpoint one step after the one it resumed from.
+        self._next = (int(self.model.num_timesteps) // self.every + 1) * self.every
 
     def _on_step(self) -> bool:
         if self.num_timesteps >= self._next:

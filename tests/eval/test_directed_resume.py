@@ -58,6 +58,8 @@ def test_a_collection_killed_midway_resumes_to_the_dataset_of_an_uninterrupted_o
 
     resumed = _collect(cut)
     assert resumed.info["resumed_at"] == [50]
+    # No checkpoint after the resume: the next one was due at 75, past the end.
+    assert sorted(path.name for path in cut.iterdir()) == ["agent_50.zip", "envs_50.pkl", STATE_FILE]
     assert resumed.info["collect_time_s"] >= state["collect_time_s"]
     _same_data(resumed, whole)
 
