@@ -127,12 +127,15 @@ class LocalExecutor:
         ) as pool:
             futures: dict[Future[JobResult], int] = {pool.submit(_pool_job, self.runner, job): i for i, job in enumerate(jobs)}
 
-            def stop_workers() -> None:
+            def stop_workers(signal_name: str) -> None:
                 # SIGTERM or Ctrl-C to this process: no new job starts, and the running ones are asked to stop
                 # (inside learn, each writes its checkpoint at its next step; elsewhere, it finishes its job).
-                # A Ctrl-C in a terminal reaches the workers directly too.
+                # SIGTERM is passed on; a Ctrl-C in a terminal reaches the workers already, and a second signal
+                # would stop them at once.
                 for future in futures:
                     future.cancel()
+                if signal_name != "SIGTERM":
+                    return
                 for process in multiprocessing.active_children():
                     if process.pid is not None:
                         with contextlib.suppress(ProcessLookupError):

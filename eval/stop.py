@@ -3,20 +3,22 @@
 A Sawyer run or directed collection keeps a checkpoint every 10,000 transitions (``eval.resume``,
 ``eval.pretraining``), 20 to 30 minutes of one core apart. A process killed between two of them loses that work.
 Inside :func:`stop_at_next_step`, SIGTERM (what ``kill``, a batch scheduler's preemption or a session's end sends)
-and a first Ctrl-C (SIGINT) do not end the process: they set a flag. The run's :class:`CheckpointOnStop` callback
+and Ctrl-C (SIGINT) do not end the process: they set a flag. The run's :class:`CheckpointOnStop` callback
 sees it after the current env step (a step ends within a second; an evaluation in progress is finished first),
 writes the same checkpoint the run writes after an evaluation, and stops ``learn``. The job then ends with status
-``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from that step. A second Ctrl-C
-stops at once (``KeyboardInterrupt``), leaving the last periodic checkpoint.
+``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from that step. A second signal
+stops the process at once, as without this module, leaving the last checkpoint written.
 
 Outside the block (building envs, offline training, final evaluations, figures) the signals keep their usual
-effect. Handlers can be set only in a process's main thread; elsewhere (a Ray worker's task thread) the block does
-nothing and the signals keep their usual effect too.
+effect, except in the workers of ``LocalExecutor``'s pool, which remember them (:func:`install_worker_handlers`):
+there the job in progress finishes and no other starts. Handlers can be set only in a process's main thread;
+elsewhere (a Ray worker's task thread) the block does nothing and the signals keep their usual effect too.
 """
 
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import sys
 import threading
@@ -56,8 +58,12 @@ _worker = False
 """Whether this process is a pool worker (:func:`install_worker_handlers`)."""
 
 
-def _handler(flag: StopFlag, on_request: Callable[[], None] | None, message: str | None) -> Callable[[int, Any], None]:
-    """A signal handler that sets ``flag`` on the first signal and raises ``KeyboardInterrupt`` on a second SIGINT."""
+def _handler(flag: StopFlag, on_request: Callable[[str], None] | None, message: str | None) -> Callable[[int, Any], None]:
+    """A signal handler that sets ``flag`` on the first signal; a second one stops the process at once.
+
+    At once means as without the handler: a second SIGINT raises ``KeyboardInterrupt``, a second SIGTERM ends the
+    process by SIGTERM (``Process.terminate`` twice, ``kill`` twice).
+    """
 
     def handler(signum: int, frame: Any) -> None:
         name = signal.Signals(signum).name
@@ -65,12 +71,14 @@ def _handler(flag: StopFlag, on_request: Callable[[], None] | None, message: str
         if flag.requested:
             if signum == signal.SIGINT:
                 raise KeyboardInterrupt
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
             return
         flag.signal_name = name
         if message:
             print(f"ebm-eval: {name} received: {message}", file=sys.stderr, flush=True)
         if on_request is not None:
-            on_request()
+            on_request(name)
 
     return handler
 
@@ -81,11 +89,11 @@ def stop_received() -> str | None:
 
 
 def install_worker_handlers() -> None:
-    """For a pool worker, at its start: SIGTERM and a first SIGINT are remembered rather than ending the process.
+    """For a pool worker, at its start: a first SIGTERM or SIGINT is remembered rather than ending the process.
 
     The job in progress goes on (inside ``learn`` it writes its checkpoint at the next step and stops;
     :func:`stop_at_next_step` sees a signal received before ``learn`` started), and the worker starts no further
-    job (``stop_received``). A second SIGINT raises ``KeyboardInterrupt``.
+    job (``stop_received``). A second signal stops it at once.
     """
     global _worker
     _worker = True
@@ -95,15 +103,16 @@ def install_worker_handlers() -> None:
 
 
 @contextlib.contextmanager
-def stop_at_next_step(on_request: Callable[[], None] | None = None, quiet: bool = False) -> Iterator[StopFlag]:
-    """Within the block, SIGTERM and a first SIGINT set the yielded flag instead of ending the process.
+def stop_at_next_step(on_request: Callable[[str], None] | None = None, quiet: bool = False) -> Iterator[StopFlag]:
+    """Within the block, a first SIGTERM or SIGINT sets the yielded flag instead of ending the process.
 
-    A second SIGINT raises ``KeyboardInterrupt``; further SIGTERMs are ignored. The handlers in place before the
-    block are put back at its end. In a thread other than the main one, no handler is set and the flag stays unset.
-    In a pool worker that already received a stop signal, the flag is set from the start.
+    A second signal stops the process at once, as it would without the block (``KeyboardInterrupt`` for SIGINT,
+    death by SIGTERM). The handlers in place before the block are put back at its end. In a thread other than the
+    main one, no handler is set and the flag stays unset. In a pool worker that already received a stop signal,
+    the flag is set from the start.
 
-    :param on_request: called once, from the handler, when the first signal arrives (e.g. to pass it on to worker
-        processes).
+    :param on_request: called once, from the handler, with the signal's name ("SIGTERM") when the first signal
+        arrives (e.g. to pass it on to worker processes).
     :param quiet: print nothing when a signal arrives (by default one line on stderr says what happens).
     :return: the flag (a context manager yielding it).
     """

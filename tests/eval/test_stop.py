@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
 import threading
 import time
 from pathlib import Path
@@ -18,24 +20,40 @@ from eval.stop import StopFlag, stop_at_next_step
 
 pytest.importorskip("envs.particle")
 
+REPO = Path(__file__).resolve().parents[2]
+
 # ---- the flag ------------------------------------------------------------------------------------------------------
 
 
 def test_a_signal_inside_the_block_sets_the_flag_and_the_handlers_are_put_back():
     before = {signum: signal.getsignal(signum) for signum in (signal.SIGTERM, signal.SIGINT)}
     calls: list[str] = []
-    with stop_at_next_step(on_request=lambda: calls.append("forwarded"), quiet=True) as flag:
+    with stop_at_next_step(on_request=calls.append, quiet=True) as flag:
         assert not flag.requested
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(0.01)  # the handler runs at the next bytecode boundary of the main thread
-        assert flag.requested and flag.signal_name == "SIGTERM"
-        os.kill(os.getpid(), signal.SIGTERM)  # a second SIGTERM changes nothing
-        time.sleep(0.01)
-        assert calls == ["forwarded"]
-        with pytest.raises(KeyboardInterrupt):  # a second Ctrl-C stops at once
+        assert flag.requested and flag.signal_name == "SIGTERM" and calls == ["SIGTERM"]
+        with pytest.raises(KeyboardInterrupt):  # a second signal, Ctrl-C, stops at once
             os.kill(os.getpid(), signal.SIGINT)
             time.sleep(1.0)
     assert {signum: signal.getsignal(signum) for signum in before} == before
+
+
+def test_a_second_sigterm_ends_the_process_by_sigterm():
+    code = (
+        "import os, signal, time\n"
+        "from eval.stop import stop_at_next_step\n"
+        "with stop_at_next_step(quiet=True) as flag:\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(0.05)\n"
+        "    print('first:', flag.signal_name, flush=True)\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(5)\n"
+        "print('survived', flush=True)\n"
+    )
+    completed = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert completed.returncode == -signal.SIGTERM, completed.stderr[-2000:]
+    assert completed.stdout == "first: SIGTERM\n"
 
 
 def test_the_first_ctrl_c_sets_the_flag_and_says_so(capsys):
