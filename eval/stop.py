@@ -125,7 +125,7 @@ def stop_at_next_step(on_request: Callable[[str], None] | None = None, quiet: bo
         if quiet
         else (
             "writing a checkpoint after the current step, then stopping (run the same command again to resume; "
-            "Ctrl-C again to stop at once)"
+            "a second signal stops at once)"
         )
     )
     handler = _handler(flag, on_request, message)
