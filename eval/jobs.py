@@ -380,7 +380,12 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             timesteps, reused = 0, None
         else:
             timesteps, reused = _learn_online(model, job, eval_env, spec.callbacks, resume)
-        learn_time = time.perf_counter() - learn_start + (resume.learn_time_s if resume is not None else 0.0)
+        # Time of earlier processes: an online run's up to its checkpoint, a pretrained run's on the directed
+        # collection it finished.
+        earlier = resume.learn_time_s if resume is not None else 0.0
+        if pretraining is not None:
+            earlier += float(pretraining.get("collect_time_earlier_processes_s", 0.0))
+        learn_time = time.perf_counter() - learn_start + earlier
         eval_start = time.perf_counter()
         episodes = reused or evaluate_episodes(model, eval_env, job.eval_episodes)
         eval_time = time.perf_counter() - eval_start
@@ -388,7 +393,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
-        wall_time = time.perf_counter() - start + (resume.learn_time_s if resume is not None else 0.0)
+        wall_time = time.perf_counter() - start + earlier
         metrics = {
             "env_id": job.env_id,
             "agent": job.agent,

@@ -68,8 +68,9 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
 
     :param model: an untrained agent with ``learn_offline`` (the EBM agent, Action FF).
     :param job: a job with ``mode="pretrained"``; ``timesteps`` is the dataset size.
-    :return: what was done, for ``metrics.json``: dataset, its size and file, epochs, batch size, repeat, gradient
-        steps.
+    :return: what was done, for ``metrics.json``: dataset, its size and file, the time earlier processes spent on
+        the directed collection this job finished (``collect_time_earlier_processes_s``, counted in the run's wall
+        and learn times), epochs, batch size, repeat, gradient steps.
     :raises TypeError: for an agent that cannot learn offline.
     :raises ValueError: for unknown ``offline_kwargs``.
     """
@@ -85,7 +86,7 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r}; known: {sorted(defaults)}")
     settings = {**defaults, **job.offline_kwargs}
-    base, path = load_or_build_dataset(job)
+    base, path, earlier = _load_or_build(job)
     repeat = int(settings.get("repeat", 1))
     data = repeat_transitions(base, repeat) if repeat > 1 else base
     updates_before = int(getattr(model, "_n_updates", 0))
@@ -101,6 +102,7 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
         "dataset_size": len(base),
         "dataset_file": str(path),
         "dataset_info": base.info,
+        "collect_time_earlier_processes_s": earlier,
         "epochs": int(settings["epochs"]),
         "batch_size": int(settings["batch_size"]),
         "repeat": repeat,
@@ -143,10 +145,20 @@ def load_or_build_dataset(job: Job) -> tuple[TransitionDataset, Path]:
     :param job: a pretrained job.
     :return: the dataset and its file.
     """
+    dataset, path, _ = _load_or_build(job)
+    return dataset, path
+
+
+def _load_or_build(job: Job) -> tuple[TransitionDataset, Path, float]:
+    """``load_or_build_dataset``, and the collecting time of earlier processes when this call finished a collection.
+
+    :return: the dataset, its file, and the seconds earlier processes spent on the collection this call resumed
+        (0 when the dataset came from the cache or was collected in one go).
+    """
     path = dataset_path(job)
     with _file_lock(path.with_suffix(".lock")):
         if path.exists():
-            return TransitionDataset.load(path), path
+            return TransitionDataset.load(path), path, 0.0
         if job.dataset == "random":
             dataset = collect_random_transitions(job.env_id, job.timesteps, seed=job.seed, **job.env_kwargs)
         else:
@@ -160,10 +172,11 @@ def load_or_build_dataset(job: Job) -> tuple[TransitionDataset, Path]:
                 checkpoint_dir=collection_checkpoint_dir(job),
                 checkpoint_every=COLLECT_CHECKPOINT_EVERY,
             )
+        earlier = float(dataset.info.pop("collect_time_before_s", 0.0))
         dataset.info = to_plain({**dataset.info, "env_kwargs": job.env_kwargs})
         dataset.save(path)
         shutil.rmtree(collection_checkpoint_dir(job), ignore_errors=True)  # saved: the checkpoint is spent
-    return dataset, path
+    return dataset, path, earlier
 
 
 def collect_directed_transitions(
@@ -191,7 +204,8 @@ def collect_directed_transitions(
     :param checkpoint_dir: folder of the collection's checkpoint (None: no checkpoints).
     :param checkpoint_every: transitions between two checkpoints.
     :return: the dataset; ``info`` names the policy ``"directed"``, the agent's settings, the collection's time over
-        all processes (``collect_time_s``) and where it resumed (``resumed_at``).
+        all processes (``collect_time_s``; ``collect_time_before_s`` of the earlier ones) and where it resumed
+        (``resumed_at``).
     """
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
@@ -244,6 +258,7 @@ def collect_directed_transitions(
         "agent": "EBMPlannerAgent",
         "agent_kwargs": agent_kwargs,
         "collect_time_s": time_before + time.perf_counter() - start,
+        "collect_time_before_s": time_before,
         "resumed_at": resumed_at,
     }
     return recorder.dataset(info=to_plain(info))

@@ -8,7 +8,7 @@ import signal
 import numpy as np
 import pytest
 
-from eval.jobs import Job
+from eval.jobs import Job, run_job
 from eval.pretraining import (
     collect_directed_transitions,
     collection_checkpoint_dir,
@@ -99,12 +99,22 @@ def test_a_job_resumes_its_directed_dataset_and_removes_the_checkpoint_once_save
         with pytest.raises(RuntimeError, match="killed"):
             load_or_build_dataset(job)
     assert not dataset_path(job).exists()
-    assert json.loads((collection_checkpoint_dir(job) / STATE_FILE).read_text())["num_timesteps"] == 25
+    state = json.loads((collection_checkpoint_dir(job) / STATE_FILE).read_text())
+    assert state["num_timesteps"] == 25
 
-    dataset, path = load_or_build_dataset(job)
+    result = run_job(job)  # finishes the collection, then pretrains and evaluates
+    assert result.ok, result.error
+    assert not collection_checkpoint_dir(job).exists()  # saved: the checkpoint is spent
+    # The killed process's collecting time counts in the run's times, as an online run's earlier processes do.
+    metrics = json.loads((job.run_dir / "metrics.json").read_text())
+    earlier = metrics["pretraining"]["collect_time_earlier_processes_s"]
+    assert earlier == pytest.approx(state["collect_time_s"]) and earlier > 0
+    assert metrics["wall_time_s"] > earlier and metrics["learn_time_s"] > earlier
+
+    dataset, path = load_or_build_dataset(job)  # from the cache now
     assert path == dataset_path(job) and path.exists() and len(dataset) == 40
     assert dataset.info["resumed_at"] == [25] and dataset.info["policy"] == "directed"
-    assert not collection_checkpoint_dir(job).exists()  # saved: the checkpoint is spent
+    assert dataset.info["collect_time_s"] > earlier and "collect_time_before_s" not in dataset.info
 
 
 def test_a_collection_stopped_by_ctrl_c_checkpoints_that_step_and_resumes_to_the_same_dataset(
