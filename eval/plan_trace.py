@@ -16,7 +16,7 @@ import numpy as np
 
 from ebm_agent import EBMPlannerAgent
 
-__all__ = ["PlanStep", "load_traced_agent", "trace_parser", "trace_plans"]
+__all__ = ["PlanStep", "load_traced_agent", "sawyer_real_transitions", "trace_parser", "trace_plans"]
 
 
 @dataclass(frozen=True)
@@ -111,3 +111,31 @@ def load_traced_agent(
     torch.set_num_threads(1)
     env = gym.make(env_id, **({} if args.weight is None else {args.weight_name: args.weight}))
     return args, env, EBMPlannerAgent.load(args.model, env=env)
+
+
+def sawyer_real_transitions(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``count`` real transitions of the variable-goal Sawyer, to check an inverse dynamics against.
+
+    Episodes of 250 steps alternate between the env's exploration actions (random joint targets) and uniform torques
+    in [-1, 1], so the set holds both slow, directed moves and fast, jerky ones.
+
+    :param count: how many transitions.
+    :param seed: seed of the resets and of the uniform torques.
+    :return: states [B, 20], next states [B, 20] and the actions [B, 7] that made them.
+    """
+    from envs.sawyer import SawyerReachEnv
+
+    env = SawyerReachEnv(goal="variable")
+    rng = np.random.default_rng(seed)
+    states, next_states, actions = [], [], []
+    obs, _ = env.reset(seed=seed)
+    for step in range(count):
+        if step % 250 == 0:
+            obs, _ = env.reset(seed=seed + step)
+        exploring = (step // 250) % 2 == 0
+        action = env.sample_exploration_action() if exploring else rng.uniform(-1.0, 1.0, 7).astype(np.float32)
+        states.append(obs["observation"])
+        obs, *_ = env.step(action)
+        next_states.append(obs["observation"])
+        actions.append(action)
+    return np.array(states), np.array(next_states), np.array(actions)

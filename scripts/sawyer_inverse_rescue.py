@@ -25,24 +25,7 @@ import envs  # noqa: F401  (registers ebm/SawyerReach-v0)
 from ebm_agent import EBMPlannerAgent
 from envs.sawyer import INVERSE_RESCUE_CEILING, SawyerReachEnv
 from eval.jobs import EVAL_SEED_OFFSET
-
-
-def real_transitions(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``count`` real transitions: states [B, 20], next states [B, 20] and the actions [B, 7] that made them."""
-    env = SawyerReachEnv(goal="variable")
-    rng = np.random.default_rng(seed)
-    states, next_states, actions = [], [], []
-    obs, _ = env.reset(seed=seed)
-    for step in range(count):
-        if step % 250 == 0:
-            obs, _ = env.reset(seed=seed + step)
-        exploring = (step // 250) % 2 == 0
-        action = env.sample_exploration_action() if exploring else rng.uniform(-1.0, 1.0, 7).astype(np.float32)
-        states.append(obs["observation"])
-        obs, *_ = env.step(action)
-        next_states.append(obs["observation"])
-        actions.append(action)
-    return np.array(states), np.array(next_states), np.array(actions)
+from eval.plan_trace import sawyer_real_transitions
 
 
 def planned_transitions(model: str, steps: int) -> tuple[np.ndarray, np.ndarray]:
@@ -113,7 +96,7 @@ def main(argv: list[str] | None = None) -> dict[str, dict[str, float]]:
     parser.add_argument("--real", type=int, default=1000, help="real transitions collected")
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    states, next_states, actions = real_transitions(args.real)
+    states, next_states, actions = sawyer_real_transitions(args.real)
     results = {"real": compare(states, next_states, actions)}
     results["planned"] = compare(*planned_transitions(args.model, args.plan_steps))
     print(

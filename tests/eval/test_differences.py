@@ -32,7 +32,24 @@ def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
     assert "no inverse dynamics" in explain("fixed_on_variable/sawyer", "action-ff")
     assert "'Residual by default'); the original predicted" in explain("table2/sawyer/pretrained_random", "action-ff")
     assert "matches the planned finger" in explain("inverse_dynamics/sawyer", "ebm")
+    assert "nearly every torque at the limit" in explain("table2/sawyer/pretrained_directed", "action-ff")
+    assert "nearly every torque at the limit" in explain("table2/sawyer/pretrained_directed_sequential", "action-ff")
     assert explain("table2/sawyer/pretrained_random", "ppo") == "not investigated yet."
+
+
+def test_a_setting_pattern_picks_the_rows_of_a_part_that_differ_in_more_than_the_agent():
+    assert "learned inverse model fails" in explain("inverse_dynamics/sawyer", "ebm", "RLS")
+    assert "matches the planned finger" in explain("inverse_dynamics/sawyer", "ebm", "ground truth")
+    rls = Cell("RLS", "sawyer", "ebm", (), -4694.0)
+    ground_truth = Cell("ground truth", "sawyer", "ebm", (), -3782.0)
+    found = find_differences(
+        [
+            ("inverse_dynamics/sawyer", ground_truth, np.array([-280.0, -270.0, -290.0])),
+            ("inverse_dynamics/sawyer", rls, np.array([-13000.0, -12000.0, -14000.0])),
+        ]
+    )
+    assert ["matches the planned finger" in d.explanation for d in found] == [True, False]
+    assert "learned inverse model fails" in found[1].explanation
 
 
 def test_the_section_lists_each_difference_with_its_reason():
