@@ -33,6 +33,10 @@ class ForwardDynamicsModel(nn.Module):
     :param periodic_dims: periodic state dims (angles); their prediction errors are measured the short way round
         (:meth:`error`).
     :param period: their period.
+    :param standardize_changes: predict each dim's change in units of its running mean and std over the
+        transitions trained on (:meth:`observe_changes`, :meth:`change_scale`), and train on the standardized
+        errors, so that dims whose changes are small are fitted as closely as those whose changes are large.
+        Needs ``residual``.
     """
 
     def __init__(
@@ -44,8 +48,11 @@ class ForwardDynamicsModel(nn.Module):
         residual: bool = True,
         periodic_dims: Sequence[int] = (),
         period: float = 2.0,
+        standardize_changes: bool = False,
     ) -> None:
         super().__init__()
+        if standardize_changes and not residual:
+            raise ValueError("standardize_changes needs residual=True: it standardizes the predicted change s' - s.")
         cfg = config or EnergyConfig()
         self.state_dim, self.action_dim, self.residual = state_dim, action_dim, residual
         self.periodic_dims, self.period = tuple(periodic_dims), float(period)
@@ -64,6 +71,14 @@ class ForwardDynamicsModel(nn.Module):
         keep[list(masked_dims)] = 0.0
         self.keep: Tensor
         self.register_buffer("keep", keep)  # [D] 1 for modelled dims, 0 for target dims
+        self.standardize_changes = standardize_changes
+        if standardize_changes:  # running count, mean and sum of squared deviations of the changes (float64)
+            self.change_count: Tensor
+            self.change_mean: Tensor
+            self.change_m2: Tensor
+            self.register_buffer("change_count", torch.zeros((), dtype=torch.float64))  # []
+            self.register_buffer("change_mean", torch.zeros(state_dim, dtype=torch.float64))  # [D]
+            self.register_buffer("change_m2", torch.zeros(state_dim, dtype=torch.float64))  # [D]
 
     def forward(self, states: Tensor, actions: Tensor) -> Tensor:
         """Predict next states.
@@ -73,6 +88,9 @@ class ForwardDynamicsModel(nn.Module):
         :return: [..., D].
         """
         output = self.net(torch.cat([self._inputs(states), actions], dim=-1))
+        if self.standardize_changes:
+            scale, shift = self.change_scale()
+            output = output * scale + shift
         predicted = states + output if self.residual else output
         # Target dims are constants of the episode: copy them rather than predict them.
         return self.keep * predicted + (1.0 - self.keep) * states
@@ -98,6 +116,41 @@ class ForwardDynamicsModel(nn.Module):
         wrapped[..., dims] = wrap_difference(difference[..., dims], self.period)
         return wrapped
 
+    @torch.no_grad()
+    def observe_changes(self, changes: Tensor) -> None:
+        """Fold a batch of state changes into the running statistics (exactly, as if fed one by one).
+
+        :param changes: [B, D] s' - s of training transitions (periodic dims wrapped, as :meth:`error` gives them).
+        :raises RuntimeError: when the model was built without ``standardize_changes``.
+        """
+        if not self.standardize_changes:
+            raise RuntimeError("ForwardDynamicsModel keeps change statistics only with standardize_changes=True.")
+        batch = changes.detach().to(torch.float64).reshape(-1, self.state_dim)  # [B, D]
+        count = float(batch.shape[0])
+        if count == 0:
+            return
+        batch_mean = batch.mean(dim=0)  # [D]
+        batch_m2 = ((batch - batch_mean) ** 2).sum(dim=0)  # [D]
+        total = self.change_count + count
+        delta = batch_mean - self.change_mean  # [D]
+        self.change_mean += delta * (count / total)
+        self.change_m2 += batch_m2 + delta**2 * (self.change_count * count / total)
+        self.change_count.copy_(total)
+
+    def change_scale(self, floor: float = 1e-6) -> tuple[Tensor, Tensor]:
+        """The std and mean of each dim's change so far: the network's output is ``change = output * std + mean``.
+
+        :param floor: smallest std used (a dim that never changed, such as a target dim, gets this one).
+        :return: (std [D], mean [D]) in the model's dtype; (ones, zeros) before two changes were observed.
+        """
+        if not self.standardize_changes:
+            raise RuntimeError("ForwardDynamicsModel has a change scale only with standardize_changes=True.")
+        dtype = self.keep.dtype
+        if self.change_count.item() < 2:
+            return torch.ones_like(self.keep), torch.zeros_like(self.keep)
+        std = (self.change_m2 / self.change_count).sqrt().clamp_min(floor)  # [D]
+        return std.to(dtype), self.change_mean.to(dtype)
+
     def inference_evaluator(self) -> Callable[[Tensor, Tensor], Tensor] | None:
         """
         This model as a gradient-free callable on a weight snapshot with reused buffers (the EBM planner's fast path,
@@ -109,10 +162,13 @@ class ForwardDynamicsModel(nn.Module):
         if network is None:
             return None
         keep, residual, features = self.keep, self.residual, self._inputs
+        scale = self.change_scale() if self.standardize_changes else None  # a snapshot, as the weights are
 
         def predict(states: Tensor, actions: Tensor) -> Tensor:
             inputs = torch.cat([features(states), actions], dim=-1)  # [..., F + A]
             output = network(inputs.reshape(-1, inputs.shape[-1])).reshape(states.shape)
+            if scale is not None:
+                output = output * scale[0] + scale[1]
             predicted = states + output if residual else output
             return keep * predicted + (1.0 - keep) * states
 
@@ -138,6 +194,10 @@ class ActionFFAgent(PlannerAgentBase):
     :param clip_sigma: the original Adam's per-element gradient clip; None for plain Adam.
     :param online: :class:`~ebm_agent.config.OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: unused for acting (the plan has actions); kept for API symmetry.
+    :param standardize_changes: predict each state dim's change standardized by its running mean and std over the
+        transitions trained on, and train on the standardized errors, instead of the original's plain MSE on raw
+        dims, in which the dims with the largest changes (the Sawyer's joint velocities) drown the others
+        (docs/baselines.md). Needs ``residual``.
     :param stats_window_size: episodes averaged for ``rollout/*``.
     :param tensorboard_log: TensorBoard folder.
     :param verbose: verbosity.
@@ -146,6 +206,8 @@ class ActionFFAgent(PlannerAgentBase):
     """
 
     default_tb_log_name: ClassVar[str] = "ActionFF"
+    neutral_arguments: ClassVar[dict[str, Any]] = {"standardize_changes": False}
+    """Arguments added after runs were recorded, at the value that changes nothing (``eval.registry``)."""
 
     def __init__(
         self,
@@ -159,6 +221,7 @@ class ActionFFAgent(PlannerAgentBase):
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
+        standardize_changes: bool = False,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -171,6 +234,7 @@ class ActionFFAgent(PlannerAgentBase):
         self.network_config = make_config(EnergyConfig, network, "network")
         self.residual = residual
         self.clip_sigma = clip_sigma
+        self.standardize_changes = standardize_changes
         super().__init__(
             policy,
             env,
@@ -206,6 +270,7 @@ class ActionFFAgent(PlannerAgentBase):
             self.residual,
             periodic_dims=spec.goal_indices.tolist() if spec.goal_period is not None else (),
             period=spec.goal_period or 2.0,
+            standardize_changes=self.standardize_changes,
         )
         self.policy = PlanningPolicy(
             self.observation_space,
@@ -234,19 +299,27 @@ class ActionFFAgent(PlannerAgentBase):
         return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
 
     def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
-        """One MSE gradient step of f(s, a) toward s'.
+        """One MSE gradient step of f(s, a) toward s' (on standardized changes with ``standardize_changes``).
 
         :param states: [B, D].
         :param next_states: [B, D].
         :param actions: [B, A].
-        :return: ``{"loss": ...}``.
+        :return: ``{"loss": ...}`` (the loss minimised), with ``standardize_changes`` also ``{"mse": ...}`` (raw).
         :raises FloatingPointError: on a non-finite loss (no update applied).
         """
         self.policy.set_training_mode(True)
         model = self.dynamics_model
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
-        predicted = model(as_tensor(states), as_tensor(actions))  # [B, D]
-        loss = (model.error(predicted, as_tensor(next_states)) ** 2).mean()
+        start, target = as_tensor(states), as_tensor(next_states)  # [B, D]
+        stats: dict[str, float] = {}
+        if model.standardize_changes:
+            model.observe_changes(model.error(target, start))  # the batch counts before its own step
+        squared = model.error(model(start, as_tensor(actions)), target) ** 2  # [B, D]
+        if model.standardize_changes:
+            stats["mse"] = float(squared.detach().mean().item())
+            loss = (squared / model.change_scale()[0] ** 2).mean()  # the error in units of each dim's std
+        else:
+            loss = squared.mean()
         if not torch.isfinite(loss):
             raise FloatingPointError(
                 f"The forward model diverged (loss={loss.item()}) at update {self._n_updates}; no update was applied."
@@ -256,7 +329,7 @@ class ActionFFAgent(PlannerAgentBase):
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
-        return {"loss": float(loss.item())}
+        return {"loss": float(loss.item()), **stats}
 
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
         positives = self._replay_positives(self._fresh_positives(segments))

@@ -4,6 +4,8 @@ Usage:
     python scripts/probe.py table1/particle/pretrained action-ff residual=true --seeds 0 1 2
     python scripts/probe.py table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
     python scripts/probe.py table1/reacher/pretrained ebm --env inverse_angle_weight=30 --seeds 0
+    python scripts/probe.py table2/sawyer/pretrained_directed action-ff scaled_loss=true --seeds 0 \
+        --datasets runs/results/datasets
 
 Runs the jobs of the cell (``ebm-eval --experiment <experiment> --part <part>``, agent ``AGENT``) with the given
 keyword arguments of the agent replaced (values in YAML, as ``ebm-eval --hyperparams``) and ``--env KEY=VALUE``
@@ -17,6 +19,7 @@ from __future__ import annotations
 import argparse
 import re
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import yaml
@@ -69,6 +72,11 @@ def main(argv: list[str] | None = None) -> list[float]:
     parser.add_argument("--episodes", type=int, help="deterministic evaluation episodes (default: the part's)")
     parser.add_argument("--out", default="runs/probe", help="root of the probe's results folders")
     parser.add_argument("--scale", default="paper", help="the experiment's scale: paper (default) or smoke")
+    parser.add_argument(
+        "--datasets",
+        help="a results folder's datasets/ to pretrain from (e.g. runs/results/datasets), linked into the probe's "
+        "folder so that a directed dataset is reused rather than collected again (hours on the Sawyer)",
+    )
     args = parser.parse_args(argv)
     changes = dict(args.changes)
     env_changes = dict(args.env)
@@ -76,6 +84,8 @@ def main(argv: list[str] | None = None) -> list[float]:
     labels += [f"env.{key}-{value}" for key, value in env_changes.items()]
     label = "_".join(labels) or "unchanged"
     out = f"{args.out}/{args.part}/{args.agent}/{re.sub(r'[^A-Za-z0-9_.-]+', '', label)}"
+    if args.datasets:
+        link_datasets(Path(args.datasets), Path(out))
     experiment = args.part.split("/")[0]
     try:
         part = select_parts(build_parts([experiment], make_context(args.scale, out)), [args.part])[0]
@@ -98,6 +108,24 @@ def main(argv: list[str] | None = None) -> list[float]:
         print(f"{args.part} {args.agent} {settings} seed {seed}: {result.score_mean:.2f} ({result.wall_time_s:.0f} s)")
     print(f"mean {np.mean(scores):.2f} ± {np.std(scores):.2f} over {len(scores)} seed(s); results in {out}/")
     return scores
+
+
+def link_datasets(source: Path, out: Path) -> None:
+    """Make ``<out>/datasets`` a link to ``source``, the cached datasets of another results folder.
+
+    :param source: an existing ``datasets`` folder.
+    :param out: the probe's results folder.
+    :raises SystemExit: when ``source`` is not a folder, or ``<out>/datasets`` exists and is something else.
+    """
+    if not source.is_dir():
+        raise SystemExit(f"--datasets {source}: no such folder (give a results folder's datasets/).")
+    link = out / "datasets"
+    if link.is_symlink() and link.resolve() == source.resolve():
+        return
+    if link.exists() or link.is_symlink():
+        raise SystemExit(f"{link} already exists and is not a link to {source}; remove it or drop --datasets.")
+    out.mkdir(parents=True, exist_ok=True)
+    link.symlink_to(source.resolve(), target_is_directory=True)
 
 
 if __name__ == "__main__":

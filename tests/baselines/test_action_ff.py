@@ -66,3 +66,68 @@ def test_sawyer_inverse_dynamics_ablation_is_a_parameter(inverse_dynamics):
     obs, _ = env.reset(seed=1)
     action, _ = agent.predict(obs, deterministic=True)
     assert action.shape == (7,) and np.all(np.isfinite(action)) and np.all(np.abs(action) <= 1.0)
+
+
+def test_standardized_changes_keep_exact_running_statistics():
+    from baselines.action_ff import ForwardDynamicsModel
+
+    model = ForwardDynamicsModel(3, 2, masked_dims=[2], standardize_changes=True)
+    scale, shift = model.change_scale()
+    assert torch.equal(scale, torch.ones(3)) and torch.equal(shift, torch.zeros(3))  # nothing observed yet
+    changes = torch.randn(50, 3, generator=torch.Generator().manual_seed(0)) * torch.tensor([1.0, 0.01, 0.0])
+    for batch in torch.split(changes, [7, 1, 30, 12]):
+        model.observe_changes(batch)
+    assert model.change_count.item() == 50
+    scale, shift = model.change_scale()
+    assert torch.allclose(shift, changes.mean(dim=0), atol=1e-6)
+    assert torch.allclose(scale[:2], changes[:, :2].std(dim=0, unbiased=False), rtol=1e-5)
+    assert scale[2] == pytest.approx(1e-6)  # a dim that never changed gets the floor
+    states, actions = torch.zeros(4, 3), torch.zeros(4, 2)
+    fast = model.inference_evaluator()
+    assert fast is not None
+    with torch.no_grad():
+        assert torch.allclose(fast(states, actions), model(states, actions), atol=1e-6)
+        raw = model.net(torch.cat([states, actions], dim=-1))  # [4, 3] the network's standardized changes
+        expected = states + raw * scale + shift
+        assert torch.allclose(model(states, actions)[:, :2], expected[:, :2], atol=1e-6)
+    with pytest.raises(RuntimeError, match="standardize_changes=True"):
+        ForwardDynamicsModel(3, 2).observe_changes(changes)
+    with pytest.raises(ValueError, match="residual=True"):
+        ForwardDynamicsModel(3, 2, residual=False, standardize_changes=True)
+
+
+def test_standardized_changes_fit_a_dim_whose_changes_are_small_where_plain_mse_neglects_it(particle_dataset, tmp_path):
+    from ebm_agent import TransitionDataset
+
+    # The particle with its y moves shrunk 100 times: under plain MSE y's errors hardly count; standardized, they do.
+    change = particle_dataset.next_states - particle_dataset.states
+    change[:, 1] *= 0.01
+    shrunk = TransitionDataset(
+        particle_dataset.states, particle_dataset.states + change, particle_dataset.actions, particle_dataset.episode_ids
+    )
+    relative = {}
+    for standardize in (False, True):
+        agent = ActionFFAgent("MultiInputPolicy", "ebm/Particle-v0", seed=0, standardize_changes=standardize, **TINY)
+        agent.learn_offline(shrunk, epochs=3, batch_size=256, log_interval=0)
+        errors = np.abs(_predict(agent, shrunk) - shrunk.next_states[:2000])  # [2000, D]
+        relative[standardize] = errors.mean(axis=0) / np.abs(change[:2000]).mean(axis=0)  # [D] error / change
+    assert relative[True][1] < 0.3 < 1.0 < relative[False][1], relative  # y: fitted, against worse than no model
+    assert relative[True][0] < relative[False][0], relative
+
+    agent.save(tmp_path / "ff.zip")
+    loaded = ActionFFAgent.load(tmp_path / "ff.zip")
+    assert loaded.standardize_changes
+    assert torch.equal(loaded.dynamics_model.change_mean, agent.dynamics_model.change_mean)
+    assert loaded.dynamics_model.change_count.item() == agent.dynamics_model.change_count.item() > 0
+
+
+def test_standardize_changes_is_a_neutral_argument_that_keeps_recorded_runs_current():
+    from eval.registry import class_defaults
+
+    assert "standardize_changes" not in class_defaults(ActionFFAgent)
+
+
+def _predict(agent: ActionFFAgent, dataset) -> np.ndarray:
+    with torch.no_grad():
+        predicted = agent.dynamics_model(torch.as_tensor(dataset.states[:2000]), torch.as_tensor(dataset.actions[:2000]))
+    return predicted.numpy()
