@@ -34,3 +34,21 @@ def test_an_unknown_part_is_a_usage_error(probe, tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
         probe.main(["table9/particle/online", "ebm", "--scale", "smoke", "--out", str(tmp_path)])
     assert stop.value.code == 2 and "unknown experiment" in capsys.readouterr().err
+
+
+def test_datasets_of_another_results_folder_are_linked_once_and_never_over_a_folder(load_script, tmp_path):
+    script = load_script("probe")
+    source = tmp_path / "results" / "datasets"
+    (source / "sawyer").mkdir(parents=True)
+    (source / "sawyer" / "directed_n100000_s0_x.npz").write_bytes(b"data")
+    out = tmp_path / "probe" / "cell"
+    script.link_datasets(source, out)
+    script.link_datasets(source, out)  # the same link again: nothing to do
+    assert (out / "datasets").is_symlink()
+    assert (out / "datasets" / "sawyer" / "directed_n100000_s0_x.npz").read_bytes() == b"data"
+    with pytest.raises(SystemExit, match="no such folder"):
+        script.link_datasets(tmp_path / "missing", out)
+    other = tmp_path / "probe" / "other"
+    (other / "datasets").mkdir(parents=True)
+    with pytest.raises(SystemExit, match="already exists"):
+        script.link_datasets(source, other)
