@@ -33,10 +33,10 @@ class ForwardDynamicsModel(nn.Module):
     :param periodic_dims: periodic state dims (angles); their prediction errors are measured the short way round
         (:meth:`error`).
     :param period: their period.
-    :param standardize_changes: predict each dim's change in units of its running mean and std over the
-        transitions trained on (:meth:`observe_changes`, :meth:`change_scale`), and train on the standardized
-        errors, so that dims whose changes are small are fitted as closely as those whose changes are large.
-        Needs ``residual``.
+    :param standardize_outputs: the network predicts each dim of its target (the change s' - s, or s' without
+        ``residual``) in units of that dim's running mean and std over the transitions trained on
+        (:meth:`observe_transitions`, :meth:`output_scale`), and is trained on the standardized errors, so that dims
+        whose changes are small are fitted as closely as those whose changes are large.
     """
 
     def __init__(
@@ -48,11 +48,9 @@ class ForwardDynamicsModel(nn.Module):
         residual: bool = True,
         periodic_dims: Sequence[int] = (),
         period: float = 2.0,
-        standardize_changes: bool = False,
+        standardize_outputs: bool = False,
     ) -> None:
         super().__init__()
-        if standardize_changes and not residual:
-            raise ValueError("standardize_changes needs residual=True: it standardizes the predicted change s' - s.")
         cfg = config or EnergyConfig()
         self.state_dim, self.action_dim, self.residual = state_dim, action_dim, residual
         self.periodic_dims, self.period = tuple(periodic_dims), float(period)
@@ -71,14 +69,14 @@ class ForwardDynamicsModel(nn.Module):
         keep[list(masked_dims)] = 0.0
         self.keep: Tensor
         self.register_buffer("keep", keep)  # [D] 1 for modelled dims, 0 for target dims
-        self.standardize_changes = standardize_changes
-        if standardize_changes:  # running count, mean and sum of squared deviations of the changes (float64)
-            self.change_count: Tensor
-            self.change_mean: Tensor
-            self.change_m2: Tensor
-            self.register_buffer("change_count", torch.zeros((), dtype=torch.float64))  # []
-            self.register_buffer("change_mean", torch.zeros(state_dim, dtype=torch.float64))  # [D]
-            self.register_buffer("change_m2", torch.zeros(state_dim, dtype=torch.float64))  # [D]
+        self.standardize_outputs = standardize_outputs
+        if standardize_outputs:  # running count, mean and sum of squared deviations of the targets (float64)
+            self.target_count: Tensor
+            self.target_mean: Tensor
+            self.target_m2: Tensor
+            self.register_buffer("target_count", torch.zeros((), dtype=torch.float64))  # []
+            self.register_buffer("target_mean", torch.zeros(state_dim, dtype=torch.float64))  # [D]
+            self.register_buffer("target_m2", torch.zeros(state_dim, dtype=torch.float64))  # [D]
 
     def forward(self, states: Tensor, actions: Tensor) -> Tensor:
         """Predict next states.
@@ -88,8 +86,8 @@ class ForwardDynamicsModel(nn.Module):
         :return: [..., D].
         """
         output = self.net(torch.cat([self._inputs(states), actions], dim=-1))
-        if self.standardize_changes:
-            scale, shift = self.change_scale()
+        if self.standardize_outputs:
+            scale, shift = self.output_scale()
             output = output * scale + shift
         predicted = states + output if self.residual else output
         # Target dims are constants of the episode: copy them rather than predict them.
@@ -117,39 +115,42 @@ class ForwardDynamicsModel(nn.Module):
         return wrapped
 
     @torch.no_grad()
-    def observe_changes(self, changes: Tensor) -> None:
-        """Fold a batch of state changes into the running statistics (exactly, as if fed one by one).
+    def observe_transitions(self, states: Tensor, next_states: Tensor) -> None:
+        """Fold a batch of training targets into the running statistics (exactly, as if fed one by one).
 
-        :param changes: [B, D] s' - s of training transitions (periodic dims wrapped, as :meth:`error` gives them).
-        :raises RuntimeError: when the model was built without ``standardize_changes``.
+        :param states: [B, D] s.
+        :param next_states: [B, D] s'; the target is s' - s (periodic dims wrapped, as :meth:`error` gives them)
+            with ``residual``, else s'.
+        :raises RuntimeError: when the model was built without ``standardize_outputs``.
         """
-        if not self.standardize_changes:
-            raise RuntimeError("ForwardDynamicsModel keeps change statistics only with standardize_changes=True.")
-        batch = changes.detach().to(torch.float64).reshape(-1, self.state_dim)  # [B, D]
+        if not self.standardize_outputs:
+            raise RuntimeError("ForwardDynamicsModel keeps target statistics only with standardize_outputs=True.")
+        targets = self.error(next_states, states) if self.residual else next_states
+        batch = targets.detach().to(torch.float64).reshape(-1, self.state_dim)  # [B, D]
         count = float(batch.shape[0])
         if count == 0:
             return
         batch_mean = batch.mean(dim=0)  # [D]
         batch_m2 = ((batch - batch_mean) ** 2).sum(dim=0)  # [D]
-        total = self.change_count + count
-        delta = batch_mean - self.change_mean  # [D]
-        self.change_mean += delta * (count / total)
-        self.change_m2 += batch_m2 + delta**2 * (self.change_count * count / total)
-        self.change_count.copy_(total)
+        total = self.target_count + count
+        delta = batch_mean - self.target_mean  # [D]
+        self.target_mean += delta * (count / total)
+        self.target_m2 += batch_m2 + delta**2 * (self.target_count * count / total)
+        self.target_count.copy_(total)
 
-    def change_scale(self, floor: float = 1e-6) -> tuple[Tensor, Tensor]:
-        """The std and mean of each dim's change so far: the network's output is ``change = output * std + mean``.
+    def output_scale(self, floor: float = 1e-6) -> tuple[Tensor, Tensor]:
+        """The std and mean of each dim's target so far: the network's output is ``target = output * std + mean``.
 
         :param floor: smallest std used (a dim that never changed, such as a target dim, gets this one).
-        :return: (std [D], mean [D]) in the model's dtype; (ones, zeros) before two changes were observed.
+        :return: (std [D], mean [D]) in the model's dtype; (ones, zeros) before two transitions were observed.
+        :raises RuntimeError: when the model was built without ``standardize_outputs``.
         """
-        if not self.standardize_changes:
-            raise RuntimeError("ForwardDynamicsModel has a change scale only with standardize_changes=True.")
-        dtype = self.keep.dtype
-        if self.change_count.item() < 2:
+        if not self.standardize_outputs:
+            raise RuntimeError("ForwardDynamicsModel has an output scale only with standardize_outputs=True.")
+        if self.target_count.item() < 2:
             return torch.ones_like(self.keep), torch.zeros_like(self.keep)
-        std = (self.change_m2 / self.change_count).sqrt().clamp_min(floor)  # [D]
-        return std.to(dtype), self.change_mean.to(dtype)
+        std = (self.target_m2 / self.target_count).sqrt().clamp_min(floor)  # [D]
+        return std.to(self.keep.dtype), self.target_mean.to(self.keep.dtype)
 
     def inference_evaluator(self) -> Callable[[Tensor, Tensor], Tensor] | None:
         """
@@ -162,7 +163,7 @@ class ForwardDynamicsModel(nn.Module):
         if network is None:
             return None
         keep, residual, features = self.keep, self.residual, self._inputs
-        scale = self.change_scale() if self.standardize_changes else None  # a snapshot, as the weights are
+        scale = self.output_scale() if self.standardize_outputs else None  # a snapshot, as the weights are
 
         def predict(states: Tensor, actions: Tensor) -> Tensor:
             inputs = torch.cat([features(states), actions], dim=-1)  # [..., F + A]
@@ -194,10 +195,11 @@ class ActionFFAgent(PlannerAgentBase):
     :param clip_sigma: the original Adam's per-element gradient clip; None for plain Adam.
     :param online: :class:`~ebm_agent.config.OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: unused for acting (the plan has actions); kept for API symmetry.
-    :param standardize_changes: predict each state dim's change standardized by its running mean and std over the
-        transitions trained on, and train on the standardized errors, instead of the original's plain MSE on raw
-        dims, in which the dims with the largest changes (the Sawyer's joint velocities) drown the others
-        (docs/baselines.md). Needs ``residual``.
+    :param standardize_outputs: predict each state dim's change (or next state without ``residual``) in units of
+        its running mean and std over the transitions trained on, and train on the standardized errors (the default);
+        False is the original's plain MSE on raw dims, in which the dims with the largest changes (the Sawyer's joint
+        velocities) drown the others (docs/baselines.md, 'Standardized outputs'). ``None`` (only from ``load``)
+        stands for a model saved before this option existed, which was trained without it.
     :param stats_window_size: episodes averaged for ``rollout/*``.
     :param tensorboard_log: TensorBoard folder.
     :param verbose: verbosity.
@@ -206,8 +208,6 @@ class ActionFFAgent(PlannerAgentBase):
     """
 
     default_tb_log_name: ClassVar[str] = "ActionFF"
-    neutral_arguments: ClassVar[dict[str, Any]] = {"standardize_changes": False}
-    """Arguments added after runs were recorded, at the value that changes nothing (``eval.registry``)."""
 
     def __init__(
         self,
@@ -221,7 +221,7 @@ class ActionFFAgent(PlannerAgentBase):
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
-        standardize_changes: bool = False,
+        standardize_outputs: bool | None = True,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -234,7 +234,9 @@ class ActionFFAgent(PlannerAgentBase):
         self.network_config = make_config(EnergyConfig, network, "network")
         self.residual = residual
         self.clip_sigma = clip_sigma
-        self.standardize_changes = standardize_changes
+        # SB3's load builds the agent with _init_setup_model=False and then sets the saved attributes: a model saved
+        # before this option existed has none, and None marks it (it was trained without).
+        self.standardize_outputs = standardize_outputs if _init_setup_model else None
         super().__init__(
             policy,
             env,
@@ -260,6 +262,8 @@ class ActionFFAgent(PlannerAgentBase):
         return model
 
     def _build_model(self) -> None:
+        if self.standardize_outputs is None:  # loaded from a file saved before the option existed
+            self.standardize_outputs = False
         spec = self.goal_spec
         assert spec is not None
         dynamics = ForwardDynamicsModel(
@@ -270,7 +274,7 @@ class ActionFFAgent(PlannerAgentBase):
             self.residual,
             periodic_dims=spec.goal_indices.tolist() if spec.goal_period is not None else (),
             period=spec.goal_period or 2.0,
-            standardize_changes=self.standardize_changes,
+            standardize_outputs=bool(self.standardize_outputs),
         )
         self.policy = PlanningPolicy(
             self.observation_space,
@@ -299,12 +303,12 @@ class ActionFFAgent(PlannerAgentBase):
         return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
 
     def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
-        """One MSE gradient step of f(s, a) toward s' (on standardized changes with ``standardize_changes``).
+        """One MSE gradient step of f(s, a) toward s' (on standardized targets with ``standardize_outputs``).
 
         :param states: [B, D].
         :param next_states: [B, D].
         :param actions: [B, A].
-        :return: ``{"loss": ...}`` (the loss minimised), with ``standardize_changes`` also ``{"mse": ...}`` (raw).
+        :return: ``{"loss": ...}`` (the loss minimised), with ``standardize_outputs`` also ``{"mse": ...}`` (raw).
         :raises FloatingPointError: on a non-finite loss (no update applied).
         """
         self.policy.set_training_mode(True)
@@ -312,12 +316,12 @@ class ActionFFAgent(PlannerAgentBase):
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         start, target = as_tensor(states), as_tensor(next_states)  # [B, D]
         stats: dict[str, float] = {}
-        if model.standardize_changes:
-            model.observe_changes(model.error(target, start))  # the batch counts before its own step
+        if model.standardize_outputs:
+            model.observe_transitions(start, target)  # the batch counts before its own step
         squared = model.error(model(start, as_tensor(actions)), target) ** 2  # [B, D]
-        if model.standardize_changes:
+        if model.standardize_outputs:
             stats["mse"] = float(squared.detach().mean().item())
-            loss = (squared / model.change_scale()[0] ** 2).mean()  # the error in units of each dim's std
+            loss = (squared / model.output_scale()[0] ** 2).mean()  # the error in units of each dim's std
         else:
             loss = squared.mean()
         if not torch.isfinite(loss):

@@ -111,20 +111,6 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "FF copies neither bug.",
     ),
     Explanation(
-        "table2/sawyer/pretrained_directed*",
-        "action-ff",
-        "The directed transitions are those of our EBM learning online, and its ground-truth inverse dynamics, asked "
-        "for the large moves its plans make, puts nearly every torque at the limit: `python scripts/sawyer_ff_fit.py "
-        "<directed dataset.npz> <model.zip>` prints the fraction per joint. An Action FF trained on them, shuffled or "
-        "in sequence, then plans with torques between the limits, which the data hardly shows, and predicts the "
-        "finger's move no better than 'no change' on the data itself and on real transitions (the same script; its "
-        "plain MSE on raw state dims is dominated by the joint velocities, whose changes are the largest, and a "
-        "linear fit predicts the joint angles better). So both directed rows stay below the FF pretrained on the "
-        "env's exploration actions, whichever order the batches come in, and the collapse the paper reports for "
-        "sequential batches does not show on top of it. Our Sawyer is also not the authors' arm but a torque-driven "
-        "build of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's only in scale.",
-    ),
-    Explanation(
         "inverse_dynamics/sawyer",
         "ebm",
         "The learned inverse model fails, not the energy: `python scripts/sawyer_learned_inverse.py <model.zip>` shows "
@@ -141,17 +127,21 @@ EXPLANATIONS: tuple[Explanation, ...] = (
     Explanation(
         "table2/sawyer/pretrained_*",
         "action-ff",
-        "Our Action FF predicts the change of state (docs/baselines.md, 'Residual by default'); the original predicted "
-        "the absolute next state. With the absolute model this row scores far lower, nearer the paper's number but "
-        "still above it (`python scripts/probe.py table2/sawyer/pretrained_random action-ff residual=false --seeds 0 "
-        "1 2`, docs/baselines.md). Our Sawyer is also not the authors' arm but a torque-driven build of Metaworld's "
-        "Sawyer (docs/mujoco_envs.md), so its scores compare with the paper's only in scale.",
+        "Our Action FF predicts the change of state (docs/baselines.md, 'Residual by default'), each dim standardized "
+        "by its running mean and std ('Standardized outputs'); the original predicted the absolute next state by plain "
+        "MSE on raw dims. With the absolute model the random-data row scores far lower, nearer the paper's number but "
+        "still above it (`python scripts/probe.py table2/sawyer/pretrained_random action-ff residual=false --seeds 0 1 "
+        "2`, docs/baselines.md), and with plain MSE every pretrained row does (docs/baselines.md, 'Standardized "
+        "outputs'): its loss, dominated by the joint velocities, left the finger's move unlearned. Our Sawyer is also "
+        "not the authors' arm but a torque-driven build of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores "
+        "compare with the paper's only in scale.",
     ),
     Explanation(
         "*/sawyer*",  # the online fixed- and variable-goal runs, and the fixed-goal model on variable goals
         "action-ff",
-        "Our Action FF predicts the change of state (docs/baselines.md, 'Residual by default'), where the original "
-        "predicted the absolute next state, and it plans torques through that model, so it needs no inverse dynamics "
+        "Our Action FF predicts the change of state, each dim standardized (docs/baselines.md, 'Residual by default' "
+        "and 'Standardized outputs'), where the original predicted the absolute next state by plain MSE on raw dims, "
+        "and it plans torques through that model, so it needs no inverse dynamics "
         "and learns quickly on this arm (its learning curve is in the run's evaluations.npz). The original's FF online "
         "loop also indexed past the end of its plan at the last step (reference/original_code.md §7). Our Sawyer is "
         "not the authors' arm but a torque-driven build of Metaworld's Sawyer (docs/mujoco_envs.md), so its scores "

@@ -68,35 +68,37 @@ def test_sawyer_inverse_dynamics_ablation_is_a_parameter(inverse_dynamics):
     assert action.shape == (7,) and np.all(np.isfinite(action)) and np.all(np.abs(action) <= 1.0)
 
 
-def test_standardized_changes_keep_exact_running_statistics():
+def test_standardized_outputs_keep_exact_running_statistics_of_the_targets():
     from baselines.action_ff import ForwardDynamicsModel
 
-    model = ForwardDynamicsModel(3, 2, masked_dims=[2], standardize_changes=True)
-    scale, shift = model.change_scale()
+    model = ForwardDynamicsModel(3, 2, masked_dims=[2], standardize_outputs=True)
+    scale, shift = model.output_scale()
     assert torch.equal(scale, torch.ones(3)) and torch.equal(shift, torch.zeros(3))  # nothing observed yet
-    changes = torch.randn(50, 3, generator=torch.Generator().manual_seed(0)) * torch.tensor([1.0, 0.01, 0.0])
-    for batch in torch.split(changes, [7, 1, 30, 12]):
-        model.observe_changes(batch)
-    assert model.change_count.item() == 50
-    scale, shift = model.change_scale()
+    generator = torch.Generator().manual_seed(0)
+    states = torch.randn(50, 3, generator=generator)
+    changes = torch.randn(50, 3, generator=generator) * torch.tensor([1.0, 0.01, 0.0])
+    for rows in torch.split(torch.arange(50), [7, 1, 30, 12]):
+        model.observe_transitions(states[rows], states[rows] + changes[rows])
+    assert model.target_count.item() == 50
+    scale, shift = model.output_scale()
     assert torch.allclose(shift, changes.mean(dim=0), atol=1e-6)
-    assert torch.allclose(scale[:2], changes[:, :2].std(dim=0, unbiased=False), rtol=1e-5)
+    assert torch.allclose(scale[:2], changes[:, :2].std(dim=0, unbiased=False), rtol=1e-4)
     assert scale[2] == pytest.approx(1e-6)  # a dim that never changed gets the floor
-    states, actions = torch.zeros(4, 3), torch.zeros(4, 2)
+    zeros_s, zeros_a = torch.zeros(4, 3), torch.zeros(4, 2)
     fast = model.inference_evaluator()
     assert fast is not None
     with torch.no_grad():
-        assert torch.allclose(fast(states, actions), model(states, actions), atol=1e-6)
-        raw = model.net(torch.cat([states, actions], dim=-1))  # [4, 3] the network's standardized changes
-        expected = states + raw * scale + shift
-        assert torch.allclose(model(states, actions)[:, :2], expected[:, :2], atol=1e-6)
-    with pytest.raises(RuntimeError, match="standardize_changes=True"):
-        ForwardDynamicsModel(3, 2).observe_changes(changes)
-    with pytest.raises(ValueError, match="residual=True"):
-        ForwardDynamicsModel(3, 2, residual=False, standardize_changes=True)
+        assert torch.allclose(fast(zeros_s, zeros_a), model(zeros_s, zeros_a), atol=1e-6)
+        raw = model.net(torch.cat([zeros_s, zeros_a], dim=-1))  # [4, 3] the network's standardized changes
+        assert torch.allclose(model(zeros_s, zeros_a)[:, :2], (raw * scale + shift)[:, :2], atol=1e-6)
+    absolute = ForwardDynamicsModel(3, 2, residual=False, standardize_outputs=True)
+    absolute.observe_transitions(states, states + changes)  # without residual the target is the next state
+    assert torch.allclose(absolute.output_scale()[1], (states + changes).mean(dim=0), atol=1e-6)
+    with pytest.raises(RuntimeError, match="standardize_outputs=True"):
+        ForwardDynamicsModel(3, 2).observe_transitions(states, states)
 
 
-def test_standardized_changes_fit_a_dim_whose_changes_are_small_where_plain_mse_neglects_it(particle_dataset, tmp_path):
+def test_standardized_outputs_fit_a_dim_whose_changes_are_small_where_plain_mse_neglects_it(particle_dataset, tmp_path):
     from ebm_agent import TransitionDataset
 
     # The particle with its y moves shrunk 100 times: under plain MSE y's errors hardly count; standardized, they do.
@@ -107,7 +109,7 @@ def test_standardized_changes_fit_a_dim_whose_changes_are_small_where_plain_mse_
     )
     relative = {}
     for standardize in (False, True):
-        agent = ActionFFAgent("MultiInputPolicy", "ebm/Particle-v0", seed=0, standardize_changes=standardize, **TINY)
+        agent = ActionFFAgent("MultiInputPolicy", "ebm/Particle-v0", seed=0, standardize_outputs=standardize, **TINY)
         agent.learn_offline(shrunk, epochs=3, batch_size=256, log_interval=0)
         errors = np.abs(_predict(agent, shrunk) - shrunk.next_states[:2000])  # [2000, D]
         relative[standardize] = errors.mean(axis=0) / np.abs(change[:2000]).mean(axis=0)  # [D] error / change
@@ -116,15 +118,28 @@ def test_standardized_changes_fit_a_dim_whose_changes_are_small_where_plain_mse_
 
     agent.save(tmp_path / "ff.zip")
     loaded = ActionFFAgent.load(tmp_path / "ff.zip")
-    assert loaded.standardize_changes
-    assert torch.equal(loaded.dynamics_model.change_mean, agent.dynamics_model.change_mean)
-    assert loaded.dynamics_model.change_count.item() == agent.dynamics_model.change_count.item() > 0
+    assert loaded.standardize_outputs is True
+    assert torch.equal(loaded.dynamics_model.target_mean, agent.dynamics_model.target_mean)
+    assert loaded.dynamics_model.target_count.item() == agent.dynamics_model.target_count.item() > 0
 
 
-def test_standardize_changes_is_a_neutral_argument_that_keeps_recorded_runs_current():
-    from eval.registry import class_defaults
+def test_a_model_saved_before_standardized_outputs_existed_loads_as_trained_without(tmp_path):
+    import json
+    import zipfile
 
-    assert "standardize_changes" not in class_defaults(ActionFFAgent)
+    agent = ActionFFAgent("MultiInputPolicy", "ebm/Particle-v0", seed=0, standardize_outputs=False, **TINY)
+    agent.save(tmp_path / "new.zip")
+    with zipfile.ZipFile(tmp_path / "new.zip") as source, zipfile.ZipFile(tmp_path / "old.zip", "w") as legacy:
+        for item in source.infolist():
+            content = source.read(item.filename)
+            if item.filename == "data":  # what a save of the earlier code held: no standardize_outputs
+                data = json.loads(content)
+                del data["standardize_outputs"]
+                content = json.dumps(data).encode()
+            legacy.writestr(item, content)
+    loaded = ActionFFAgent.load(tmp_path / "old.zip")
+    assert loaded.standardize_outputs is False and not loaded.dynamics_model.standardize_outputs
+    assert ActionFFAgent("MultiInputPolicy", "ebm/Particle-v0", seed=0, **TINY).standardize_outputs is True
 
 
 def _predict(agent: ActionFFAgent, dataset) -> np.ndarray:
