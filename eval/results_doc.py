@@ -37,7 +37,14 @@ from eval.estimates import format_duration
 from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
 from eval.parts import SCALES, Cell, Part
-from eval.provenance import describe_machine, is_current_run, read_metrics, read_provenance, read_sessions
+from eval.provenance import (
+    describe_machine,
+    is_current_run,
+    job_fingerprint,
+    read_metrics,
+    read_provenance,
+    read_sessions,
+)
 from eval.records import default_docs, default_records, restore_records
 
 MIN_SEEDS_FOR_IQM = 3
@@ -53,6 +60,8 @@ class CellResult:
 
     cell: Cell
     runs: list[tuple[Job, dict[str, Any]]] = field(default_factory=list)
+    retired: int = 0
+    """Seeds with a finished run of the same configuration made with other library defaults (to be run again)."""
 
     @property
     def scores(self) -> np.ndarray:
@@ -97,6 +106,8 @@ def collect_cell(cell: Cell) -> CellResult:
         job = jobs[seed]
         metrics = read_metrics(job.run_dir)
         if metrics is None or not is_current_run(job, metrics):
+            if metrics is not None and metrics.get("fingerprint") == job_fingerprint(job):
+                result.retired += 1  # the same job under earlier defaults
             continue
         if not (job.run_dir / "evaluations.npz").exists():
             continue
@@ -135,6 +146,8 @@ def cells_table(results: Sequence[CellResult]) -> str:
     for result in results:
         cell, scores = result.cell, result.scores
         ours = _pm(scores) if len(scores) else "not run yet"
+        if not len(scores) and result.retired:
+            ours = f"rerun pending ({result.retired} run(s) made with earlier library defaults)"
         seeds = f"{len(scores)}/{len(cell.jobs)}" if len(scores) < len(cell.jobs) else str(len(scores))
         successes = [float(m["success_rate"]) for _, m in result.runs if m.get("success_rate") is not None]
         successes = successes if cell.evaluation is None else []

@@ -116,6 +116,23 @@ def test_runs_of_another_configuration_or_unfinished_ones_do_not_count(tmp_path)
     np.testing.assert_array_equal(result.scores, [-70.0, -60.0])
 
 
+def test_runs_made_with_earlier_library_defaults_are_reported_as_rerun_pending(tmp_path):
+    from eval.results_doc import cells_table
+
+    part = parts_of(tmp_path, "table1")["table1/maze/pretrained"]
+    jobs = cell(part, "action-ff").jobs
+    for job in jobs[:2]:
+        fake_run(job, -70.0)
+        metrics = json.loads((job.run_dir / "metrics.json").read_text())
+        metrics["defaults_digest"] = "0000000000000000"  # made before a default changed
+        (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+    result = collect_cell(cell(part, "action-ff"))
+    assert result.runs == [] and result.retired == 2
+    assert "rerun pending (2 run(s) made with earlier library defaults)" in cells_table([result])
+    fake_run(jobs[2], -65.0)  # one seed rerun: its number is shown
+    assert "-65.00" in cells_table([collect_cell(cell(part, "action-ff"))])
+
+
 def test_an_extra_evaluation_stands_for_the_fixed_on_variable_cell(tmp_path):
     fixed = parts_of(tmp_path, "table2")["table2/sawyer/online_fixed"]
     on_variable = parts_of(tmp_path, "fixed_on_variable")["fixed_on_variable/sawyer"]
