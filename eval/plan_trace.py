@@ -113,29 +113,34 @@ def load_traced_agent(
     return args, env, EBMPlannerAgent.load(args.model, env=env)
 
 
-def sawyer_real_transitions(count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """``count`` real transitions of the variable-goal Sawyer, to check an inverse dynamics against.
+def sawyer_real_transitions(count: int, seed: int = 0, actions: str = "mixed") -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``count`` real transitions of the variable-goal Sawyer, to check an inverse or a forward model against.
 
-    Episodes of 250 steps alternate between the env's exploration actions (random joint targets) and uniform torques
-    in [-1, 1], so the set holds both slow, directed moves and fast, jerky ones.
+    Episodes last 250 steps. With ``actions="mixed"`` they alternate between the env's exploration actions (random
+    joint targets) and uniform torques in [-1, 1], so the set holds both slow, directed moves and fast, jerky ones;
+    ``"exploration"`` or ``"uniform"`` keep to one kind.
 
     :param count: how many transitions.
     :param seed: seed of the resets and of the uniform torques.
+    :param actions: ``"mixed"``, ``"exploration"`` or ``"uniform"``.
     :return: states [B, 20], next states [B, 20] and the actions [B, 7] that made them.
+    :raises ValueError: for another ``actions``.
     """
     from envs.sawyer import SawyerReachEnv
 
+    if actions not in ("mixed", "exploration", "uniform"):
+        raise ValueError(f"actions must be 'mixed', 'exploration' or 'uniform', got {actions!r}.")
     env = SawyerReachEnv(goal="variable")
     rng = np.random.default_rng(seed)
-    states, next_states, actions = [], [], []
+    states, next_states, taken = [], [], []
     obs, _ = env.reset(seed=seed)
     for step in range(count):
         if step % 250 == 0:
             obs, _ = env.reset(seed=seed + step)
-        exploring = (step // 250) % 2 == 0
+        exploring = actions == "exploration" or (actions == "mixed" and (step // 250) % 2 == 0)
         action = env.sample_exploration_action() if exploring else rng.uniform(-1.0, 1.0, 7).astype(np.float32)
         states.append(obs["observation"])
         obs, *_ = env.step(action)
         next_states.append(obs["observation"])
-        actions.append(action)
-    return np.array(states), np.array(next_states), np.array(actions)
+        taken.append(action)
+    return np.array(states), np.array(next_states), np.array(taken)

@@ -4,7 +4,7 @@ Usage:
     python scripts/probe.py table1/particle/pretrained action-ff residual=true --seeds 0 1 2
     python scripts/probe.py table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
     python scripts/probe.py table1/reacher/pretrained ebm --env inverse_angle_weight=30 --seeds 0
-    python scripts/probe.py table2/sawyer/pretrained_directed action-ff scaled_loss=true --seeds 0 \
+    python scripts/probe.py table2/sawyer/pretrained_directed action-ff standardize_outputs=false --seeds 0 \
         --datasets runs/results/datasets
 
 Runs the jobs of the cell (``ebm-eval --experiment <experiment> --part <part>``, agent ``AGENT``) with the given

@@ -11,8 +11,8 @@ Prints three tables:
    ground-truth inverse dynamics; the random dataset holds the env's exploration actions.
 2. The model's one-step error (mean |predicted - real next state|) per group of state dims (joint angles, joint
    velocities, finger xyz) beside the mean |change| of those dims, which is the error of predicting "no change":
-   on ``--samples`` transitions of the dataset, and on as many real transitions (half exploration actions, half
-   uniform torques).
+   on ``--samples`` transitions of the dataset, on as many real transitions of the env's exploration actions, and
+   on as many of uniform torques.
 3. The Action FF agent acting for ``--steps`` steps of one deterministic evaluation episode (the harness's
    evaluation seed): the fraction of its torques at the limit, their mean |a|, the model's error and the change along
    the episode, and the return.
@@ -118,14 +118,12 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     agent = ActionFFAgent.load(args.model, env=gym.make("ebm/SawyerReach-v0"))
     pick = np.random.default_rng(0).choice(len(data["actions"]), size=min(args.samples, len(data["actions"])), replace=False)
     states, next_states, actions = (data[key][pick] for key in ("states", "next_states", "actions"))
-    real = sawyer_real_transitions(args.samples)
-    half = args.samples // 2
+    real = {kind: sawyer_real_transitions(args.samples, actions=kind) for kind in ("exploration", "uniform")}
     results: dict[str, Any] = {
         "dataset_actions": action_stats(data["actions"]),
         "fit": {
             "dataset": fit(agent.dynamics_model, states, next_states, actions),
-            "real exploration": fit(agent.dynamics_model, *(part[:half] for part in real)),
-            "real uniform": fit(agent.dynamics_model, *(part[half:] for part in real)),
+            **{f"real {kind}": fit(agent.dynamics_model, *transitions) for kind, transitions in real.items()},
         },
     }
     results["episode"] = evaluation(agent, args.steps)

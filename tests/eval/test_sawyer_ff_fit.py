@@ -34,3 +34,15 @@ def test_it_reports_the_dataset_the_fit_and_the_episode(load_script, tmp_path, c
     assert results["episode"]["return"] < 0 and len(results["episode"]["actions"]["mean_abs"]) == 7
     out = capsys.readouterr().out
     assert "| dataset | at the limit |" in out and "| FF evaluation episode |" in out and "first 3 steps" in out
+
+
+def test_real_transitions_keep_to_one_kind_of_action_when_asked():
+    from eval.plan_trace import sawyer_real_transitions
+
+    _, _, uniform = sawyer_real_transitions(20, actions="uniform")
+    _, _, exploration = sawyer_real_transitions(20, actions="exploration")
+    _, _, mixed = sawyer_real_transitions(20)  # the first 250 steps explore
+    np.testing.assert_array_equal(mixed, exploration)
+    assert not np.allclose(uniform, exploration)
+    with pytest.raises(ValueError, match="'mixed', 'exploration' or 'uniform'"):
+        sawyer_real_transitions(2, actions="random")
