@@ -23,7 +23,7 @@ demo: $(STAMP)
 	$(VENV)/bin/ebm-eval --baseline ppo
 
 test: $(STAMP)
-	MUJOCO_GL=$${MUJOCO_GL:-osmesa} PYOPENGL_PLATFORM=$${PYOPENGL_PLATFORM:-osmesa} $(PY) -m pytest -m "not slow" -n 2 -q
+	$(PY) -m pytest -m "not slow" -n 2 -q
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -m slow -q -o addopts=""

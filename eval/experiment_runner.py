@@ -195,28 +195,65 @@ def _parts_by_run(parts: Sequence[Part]) -> dict[Path, list[str]]:
 
 
 def figure_complete(part: Part) -> bool:
-    """Whether the figure part's folder holds a ``figure.json`` made at the part's scale and seeds.
+    """Whether the figure part's folder holds a ``figure.json`` made at the part's scale and seeds, under today's
+    library defaults (:func:`figure_state` is ``"complete"``).
 
     :param part: a figure part.
     :return: True when complete.
     """
+    return figure_state(part) == "complete"
+
+
+def figure_state(part: Part) -> str:
+    """What the figure part's folder holds.
+
+    A figure is made under the defaults of the agents it trains (``eval.figures_common.figure_digest``); one made
+    under others is ``"retired"``, as a table's run is (``eval.provenance.is_current_run``): ``ebm-eval
+    --experiment`` makes it again, and the report says that a rerun is pending. The digest is read from the figure's
+    ``provenance.json`` or, for a figure finished before it recorded one, from its kept seeds (``seeds/*.json``); a
+    figure with neither is taken as it is, as a run finished before runs recorded their defaults.
+
+    :param part: a figure part.
+    :return: ``"complete"``, ``"retired"`` (made under other library defaults) or ``"missing"`` (not finished, or of
+        another scale or seeds).
+    """
+    from eval.figures_common import figure_digest
+
     folder = part.figure_dir
     record = read_provenance(folder)
     if not (folder / "figure.json").exists() or record is None:
-        return False
-    return record.get("scale") == part.scale and list(record.get("seeds", [])) == list(part.seeds)
+        return "missing"
+    if record.get("scale") != part.scale or list(record.get("seeds", [])) != list(part.seeds):
+        return "missing"
+    current = figure_digest(str(part.figure))
+    recorded = _recorded_figure_digests(folder, record)
+    return "retired" if current is not None and any(digest != current for digest in recorded) else "complete"
+
+
+def _recorded_figure_digests(folder: Path, record: dict[str, Any]) -> set[str]:
+    """The defaults digests a finished figure was made under: its provenance's, else its kept seeds'."""
+    if isinstance(record.get("defaults_digest"), str):
+        return {record["defaults_digest"]}
+    seeds = [read_json_dict(path) or {} for path in sorted((folder / SEED_FOLDER).glob("*.json"))]
+    return {seed["defaults_digest"] for seed in seeds if isinstance(seed.get("defaults_digest"), str)}
 
 
 def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None:
+    from eval.figures_common import figure_digest
+
     folder = part.figure_dir
-    if figure_complete(part):
+    state = figure_state(part)
+    if state == "complete":
         log(f"skip {folder}: complete (figure {part.figure}, same scale and seeds)")
         summary.figures_skipped.append(part.name)
         return
+    if state == "retired":
+        log(f"figure {part.figure} in {folder}/ was made under earlier library defaults: making it again")
+        _pin_recorded_digest(folder, str(part.figure))
     started = {"part": part.name, "scale": part.scale, "seeds": list(part.seeds)}
     earlier = EarlierSeeds()
     if read_json_dict(folder / FIGURE_STARTED) == started:
-        kept = sorted((folder / SEED_FOLDER).glob("*.json"))
+        kept = _current_seed_files(folder, str(part.figure))
         earlier = EarlierSeeds.of(kept)
         names = ", ".join(path.name for path in kept) or "none"
         log(f"resuming figure {part.figure} in {folder}/: {len(kept)} finished seed(s) kept ({names})")
@@ -246,6 +283,7 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         part=part.name,
         scale=part.scale,
         seeds=list(part.seeds),
+        defaults_digest=figure_digest(str(part.figure)),
         # A resumed figure's time includes the seeds finished by earlier processes, where they recorded theirs.
         wall_time_s=time.perf_counter() - start + earlier.wall_time_s,
         earlier_seeds=earlier.count,
@@ -253,6 +291,33 @@ def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None
         machine=machine_info(),
     )
     summary.figures_ran.append(part.name)
+
+
+def _pin_recorded_digest(folder: Path, figure: str) -> None:
+    """Write a retired figure's earlier digest into its ``provenance.json`` (older figures kept it only in their
+    seeds): as the rerun replaces the seeds, the old ``figure.json`` must not pass for a current one before the new
+    one is written."""
+    from eval.figures_common import figure_digest
+
+    record = read_provenance(folder) or {}
+    if isinstance(record.get("defaults_digest"), str):
+        return
+    stale = sorted(_recorded_figure_digests(folder, record) - {figure_digest(figure)})
+    if stale:
+        fields_ = {key: value for key, value in record.items() if key != "command"}
+        write_provenance(folder, str(record.get("command", "unknown")), **{**fields_, "defaults_digest": stale[0]})
+
+
+def _current_seed_files(folder: Path, figure: str) -> list[Path]:
+    """The kept seeds (``seeds/*.json``) a resumed figure reuses: those made under today's defaults (the figure
+    computes the others again, ``eval.figures_common.seed_result``)."""
+    from eval.figures_common import figure_digest
+
+    current = figure_digest(figure)
+    kept = sorted((folder / SEED_FOLDER).glob("*.json"))
+    if current is None:
+        return kept
+    return [path for path in kept if (read_json_dict(path) or {}).get("defaults_digest") == current]
 
 
 @dataclass

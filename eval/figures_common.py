@@ -221,6 +221,33 @@ def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id:
     return hashlib.sha256(parts.encode()).hexdigest()[:16]
 
 
+FIGURE_AGENTS: dict[str, tuple[tuple[str, ...], str]] = {
+    "obstacle_generalisation": (("ebm", "action-ff"), "ebm/Particle-v0"),
+    "plan_diversity": (("ebm",), "ebm/Particle-v0"),
+    "reacher_directions": (("ebm",), "ebm/Reacher-v0"),
+    "maze_exploration": (("ebm",), "ebm/Maze-v0"),
+    "sawyer_exploration": (("ebm",), "ebm/SawyerReach-v0"),
+    "energy_maps": (("ebm",), "ebm/Particle-v0"),
+}
+"""Figure name -> (the agents it trains, the env whose defaults stand for them): what :func:`figure_digest` hashes.
+Energy maps trains on the particle and the maze; its seeds have always recorded the particle's EBM digest."""
+
+
+def figure_digest(figure: str) -> str | None:
+    """The defaults digest a figure's results are valid for (:func:`figure_defaults_digest` of its agents).
+
+    A finished figure records it (``provenance.json``); ``eval.experiment_runner.figure_complete`` takes a figure made
+    under other defaults as not finished, so that ``ebm-eval --experiment`` reruns it and the report says so.
+
+    :param figure: a key of ``eval.figures.FIGURES``.
+    :return: 16 hex digits, or None for a figure that declares no agents (its results are taken as they are).
+    """
+    if figure not in FIGURE_AGENTS:
+        return None
+    agents, env_id = FIGURE_AGENTS[figure]
+    return figure_defaults_digest(agents, env_id)
+
+
 def seed_result_path(out_dir: Path, figure: str, seed: int) -> Path:
     """Where :func:`seed_result` keeps one seed's result: ``<out_dir>/seeds/<figure>_seed<k>.json``."""
     return Path(out_dir) / SEED_FOLDER / f"{figure}_seed{seed}.json"
@@ -394,6 +421,7 @@ def _relative_to(path: Path, folder: Path) -> str:
 
 __all__ = [
     "EXPERIMENT_NAMES",
+    "FIGURE_AGENTS",
     "PAPER_SCORES",
     "SCALES",
     "SEED_FOLDER",
@@ -403,6 +431,7 @@ __all__ = [
     "build_ebm",
     "check_seeds",
     "figure_defaults_digest",
+    "figure_digest",
     "markdown_table",
     "pretrained_ebm",
     "reproduce_command",

@@ -33,7 +33,7 @@ from eval.figures_common import (
     budget_for,
     build_ebm,
     check_seeds,
-    figure_defaults_digest,
+    figure_digest,
     markdown_table,
     reproduce_command,
     save_png,
@@ -77,7 +77,7 @@ def energy_maps(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") ->
             if drawing is not None and not drawing.exists():  # its result without its drawing: train it again
                 seed_result_path(out_dir, f"energy_maps_{name}", seed).unlink(missing_ok=True)
             compute = functools.partial(_energy_run, budget, checkpoints, env_id, name, cost, seed, drawing)
-            measured = seed_result(out_dir, f"energy_maps_{name}", seed, compute, digest=figure_defaults_digest(("ebm",)))
+            measured = seed_result(out_dir, f"energy_maps_{name}", seed, compute, digest=figure_digest("energy_maps"))
             runs.append([SnapshotSummary.from_json(record) for record in measured["snapshots"]])
         metrics["envs"][name] = _env_metrics(runs, free)
         shutil.copyfile(kept_png, png)

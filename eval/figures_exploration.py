@@ -41,7 +41,7 @@ from eval.figures_common import (
     budget_for,
     build_ebm,
     check_seeds,
-    figure_defaults_digest,
+    figure_digest,
     markdown_table,
     reproduce_command,
     save_png,
@@ -142,7 +142,7 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
             curves[name] = _sawyer_run(agent, budget.sawyer_random_timesteps, budget.curve_points, budget.sawyer_ebm_timesteps)
         return {name: {"timesteps": c.curve_timesteps, "values": c.curve_values} for name, c in curves.items()}
 
-    digest = figure_defaults_digest(("ebm",), "ebm/SawyerReach-v0")
+    digest = figure_digest("sawyer_exploration")
     for seed in seeds:
         # Each finished seed is kept in out_dir/seeds/ (about an hour each), so a figure cut short resumes.
         measured = seed_result(out_dir, "sawyer_exploration", seed, functools.partial(explore, seed), digest=digest)

@@ -41,6 +41,7 @@ from eval.figures_common import (
     budget_for,
     build_ebm,
     check_seeds,
+    figure_digest,
     markdown_table,
     reproduce_command,
     run_episode,
@@ -113,7 +114,13 @@ def obstacle_generalisation(
 
     for seed in seeds:
         # Each finished seed is kept in out_dir/seeds/, so a figure cut short resumes at the next seed.
-        measured = seed_result(out_dir, "obstacle_generalisation", seed, functools.partial(train_and_measure, seed))
+        measured = seed_result(
+            out_dir,
+            "obstacle_generalisation",
+            seed,
+            functools.partial(train_and_measure, seed),
+            digest=figure_digest("obstacle_generalisation"),
+        )
         for method in METHODS:
             scores[method].append([float(v) for v in measured["scores"][method]])
             successes[method].extend(bool(v) for v in measured["successes"][method])

@@ -330,12 +330,15 @@ def figure_section(part: Part, figures_dir: Path, docs_dir: Path) -> list[str]:
     :param docs_dir: the document's folder (links are relative to it).
     :return: markdown lines.
     """
-    from eval.experiment_runner import figure_complete
+    from eval.experiment_runner import figure_state
 
     lines = []
     if part.paper:
         lines += ["Paper: " + ", ".join(f"{label} {value:g}" for label, value in part.paper.items()) + ".", ""]
-    if not figure_complete(part):
+    state = figure_state(part)
+    if state == "retired":
+        return [*lines, f"Rerun pending (the figure was made with earlier library defaults): `{part.command()}`"]
+    if state != "complete":
         return [*lines, f"Not run yet: `{part.command()}`"]
     figure = json.loads((part.figure_dir / "figure.json").read_text())
     if figure.get("table_md"):

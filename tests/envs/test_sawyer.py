@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import os
-
 import gymnasium as gym
 import mujoco
 import numpy as np
@@ -26,17 +24,6 @@ from envs.sawyer import (
 )
 
 GOAL_MODES = ["fixed", "variable", None]
-
-
-@pytest.fixture(scope="module")
-def gl_backend() -> None:
-    """Skip render tests when no MuJoCo GL backend works (CI installs OSMesa and sets MUJOCO_GL=osmesa)."""
-    model = mujoco.MjModel.from_xml_string("<mujoco><worldbody><geom size='0.1'/></worldbody></mujoco>")
-    try:
-        renderer = mujoco.Renderer(model, height=8, width=8)
-    except Exception as error:  # any GL failure means "no backend here"
-        pytest.skip(f"no working MuJoCo GL backend (MUJOCO_GL={os.environ.get('MUJOCO_GL')}): {error}")
-    renderer.close()
 
 
 def _finger_at(qpos: np.ndarray) -> np.ndarray:

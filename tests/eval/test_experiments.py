@@ -527,12 +527,19 @@ def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seed
 
 
 def test_a_resumed_figure_counts_the_time_of_the_seeds_earlier_processes_finished(tmp_path, monkeypatch):
+    from eval.figures_common import figure_digest
     from eval.results_doc import part_status, parts_table
+
+    digest = figure_digest("plan_diversity")
 
     def figure_that_dies(out_dir, *, seeds, scale):
         (Path(out_dir) / "seeds").mkdir(exist_ok=True)
-        (Path(out_dir) / "seeds" / "plan_diversity_seed0.json").write_text('{"seed": 0, "wall_time_s": 600.0}')
-        (Path(out_dir) / "seeds" / "plan_diversity_seed1.json").write_text('{"seed": 1}')  # from before times were kept
+        seed0 = {"seed": 0, "wall_time_s": 600.0, "defaults_digest": digest}
+        (Path(out_dir) / "seeds" / "plan_diversity_seed0.json").write_text(json.dumps(seed0))
+        seed1 = {"seed": 1, "defaults_digest": digest}  # from before times were kept
+        (Path(out_dir) / "seeds" / "plan_diversity_seed1.json").write_text(json.dumps(seed1))
+        seed2 = {"seed": 2, "wall_time_s": 900.0, "defaults_digest": "0000000000000000"}  # computed again, not counted
+        (Path(out_dir) / "seeds" / "plan_diversity_seed2.json").write_text(json.dumps(seed2))
         raise KeyboardInterrupt
 
     def figure_that_finishes(out_dir, *, seeds, scale):
@@ -559,3 +566,58 @@ def test_read_json_dict_reads_an_object_and_gives_none_for_anything_else(tmp_pat
     (tmp_path / "list.json").write_text("[1, 2]")
     assert read_json_dict(tmp_path / "ok.json") == {"a": 1}
     assert [read_json_dict(tmp_path / name) for name in ("torn.json", "list.json", "missing.json")] == [None] * 3
+
+
+def _finished_figure(folder: Path, provenance: dict[str, Any], seed_digests: dict[int, str | None]) -> None:
+    """A figure folder as a finished figure leaves it: figure.json, provenance.json and kept seeds."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "figure.json").write_text(json.dumps({"name": "obstacle_generalisation", "metrics": {"old": True}}))
+    (folder / "provenance.json").write_text(json.dumps({"command": "ebm-eval old", **provenance}))
+    for seed, digest in seed_digests.items():
+        record = {"seed": seed, "result": {}, "wall_time_s": 60.0, **({"defaults_digest": digest} if digest else {})}
+        (folder / "seeds").mkdir(exist_ok=True)
+        (folder / "seeds" / f"obstacle_generalisation_seed{seed}.json").write_text(json.dumps(record))
+
+
+def test_a_figure_made_under_earlier_defaults_is_retired_and_made_again(tmp_path, monkeypatch):
+    from eval.experiment_runner import figure_state
+    from eval.figures_common import figure_digest
+
+    (part,) = build_parts(["obstacle"], make_context("smoke", str(tmp_path)))
+    current, folder = figure_digest("obstacle_generalisation"), part.figure_dir
+    assert current is not None
+    scale = {"scale": "smoke", "seeds": list(part.seeds)}
+    _finished_figure(folder, {**scale, "defaults_digest": current}, {})
+    assert figure_state(part) == "complete"
+    _finished_figure(folder, {**scale, "defaults_digest": "0000000000000000"}, {})
+    assert figure_state(part) == "retired" and not figure_complete(part)
+    # A figure finished before figures recorded their digest: its kept seeds tell, else it is taken as it is.
+    (folder / "provenance.json").write_text(json.dumps({"command": "ebm-eval old", **scale}))
+    assert figure_state(part) == "complete"
+    _finished_figure(folder, scale, {0: current})
+    assert figure_state(part) == "complete"
+    _finished_figure(folder, scale, {0: "0000000000000000"})
+    assert figure_state(part) == "retired"
+    (folder / "figure_started.json").write_text(json.dumps({"part": part.name, **scale}))
+
+    def stopped_after_its_seeds(out_dir, *, seeds, scale):
+        # The rerun replaces the seeds with current ones, then stops before writing its figure.json.
+        for seed in seeds:
+            record = {"seed": seed, "result": {}, "defaults_digest": current, "wall_time_s": 1.0}
+            (Path(out_dir) / "seeds" / f"obstacle_generalisation_seed{seed}.json").write_text(json.dumps(record))
+        raise RuntimeError("killed")
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: stopped_after_its_seeds)
+    messages: list[str] = []
+    summary = run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=messages.append)
+    assert any("made under earlier library defaults: making it again" in m for m in messages)
+    assert any("0 finished seed(s) kept" in m for m in messages)  # the stale seed is not reused
+    assert summary.figures_failed and figure_state(part) == "retired"  # the old figure.json does not pass for new
+
+    def finishes(out_dir, *, seeds, scale):
+        (Path(out_dir) / "figure.json").write_text(json.dumps({"name": "obstacle_generalisation", "metrics": {}}))
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: finishes)
+    summary = run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    assert summary.figures_ran == [part.name] and figure_state(part) == "complete"
+    assert read_provenance(folder)["defaults_digest"] == current

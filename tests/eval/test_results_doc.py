@@ -301,3 +301,15 @@ def test_exploration_numbers_are_found_by_their_ebm_random_names(metrics, expect
         assert pair is None
     else:
         assert pair is not None and (pair[0], pair[1]) == (expected[0], pytest.approx(expected[1]))
+
+
+def test_a_figure_made_under_earlier_defaults_is_reported_as_rerun_pending(tmp_path):
+    part = parts_of(tmp_path, "obstacle")["obstacle/particle"]
+    folder = part.figure_dir
+    folder.mkdir(parents=True)
+    (folder / "figure.json").write_text(json.dumps({"name": "obstacle_generalisation", "table_md": "| old |"}))
+    provenance = {"scale": "paper", "seeds": list(part.seeds), "defaults_digest": "0000000000000000"}
+    (folder / "provenance.json").write_text(json.dumps({"command": "ebm-eval old", **provenance}))
+    text = write_results(tmp_path, tmp_path / "docs" / "results.md").read_text()
+    assert "Rerun pending (the figure was made with earlier library defaults): `ebm-eval --experiment obstacle" in text
+    assert "| old |" not in text
