@@ -167,7 +167,14 @@ SPREAD_STATISTICS = ("std", "min", "max", "low", "high", "ci", "sem")
 AGENT_NAMES = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
 
 
-def compare_scores(label: str, name: str, scores: Sequence[float], other_name: str, other: Sequence[float]) -> Comparison:
+def compare_scores(
+    label: str,
+    name: str,
+    scores: Sequence[float],
+    other_name: str,
+    other: Sequence[float],
+    retired: tuple[int, int] = (0, 0),
+) -> Comparison:
     """Whether ``scores`` beat ``other`` on average (beyond the 95% intervals from 3 seeds on), with the evidence.
 
     :param label: what is compared (an env).
@@ -175,11 +182,16 @@ def compare_scores(label: str, name: str, scores: Sequence[float], other_name: s
     :param scores: its per-seed scores [seeds] (empty: not run).
     :param other_name: the second side's name.
     :param other: its per-seed scores.
+    :param retired: each side's runs made with earlier library defaults (``eval.results_doc.CellResult.retired``):
+        a side with none of today's runs but some of those reads "rerun pending", as its table cell does.
     :return: the comparison.
     """
     if len(scores) == 0 or len(other) == 0:
-        missing = [n for n, s in ((name, scores), (other_name, other)) if len(s) == 0]
-        return Comparison(label, MISSING, f"{' and '.join(missing)} not run yet")
+        sides = [(n, r) for n, s, r in ((name, scores, retired[0]), (other_name, other, retired[1])) if len(s) == 0]
+        not_run = [n for n, r in sides if r == 0]
+        phrases = [f"{' and '.join(not_run)} not run yet"] if not_run else []
+        phrases += [f"{n} rerun pending ({r} run(s) made with earlier library defaults)" for n, r in sides if r > 0]
+        return Comparison(label, MISSING, "; ".join(phrases))
     return compare_seeds(label, name, scores, other_name, other)
 
 
@@ -307,14 +319,18 @@ def _average(value: Any) -> float | None:
     return float(array.mean())
 
 
-def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
+def evaluate_claims(
+    scores: ScoreLookup, figures: FigureLookup, retired: Callable[[CellKey], int] | None = None
+) -> list[Claim]:
     """Judge every claim from the numbers the lookups return.
 
     :param scores: per-seed scores of a table cell.
     :param figures: metrics of a figure part.
+    :param retired: runs of a table cell made with earlier library defaults (default: none), named in the evidence
+        of a comparison that lacks today's runs.
     :return: the claims with their verdicts and evidence.
     """
-    claims = [_score_claim(spec, scores) for spec in SCORE_CLAIMS]
+    claims = [_score_claim(spec, scores, retired) for spec in SCORE_CLAIMS]
     exploration = []
     for spec_ in EXPLORATION_FIGURES:
         label, part = spec_.label, spec_.part
@@ -327,7 +343,7 @@ def evaluate_claims(scores: ScoreLookup, figures: FigureLookup) -> list[Claim]:
         else:
             exploration.append(_exploration_comparison(label, part, metrics, *pair))
     claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
-    claims += [_score_claim(spec, scores) for spec in CONTROL_CLAIMS]
+    claims += [_score_claim(spec, scores, retired) for spec in CONTROL_CLAIMS]
     return claims
 
 
@@ -360,9 +376,10 @@ def _exploration_comparison(
     return Comparison(label, comparison.verdict, f"{comparison.evidence} ({part})")
 
 
-def _score_claim(spec: ScoreClaim, scores: ScoreLookup) -> Claim:
+def _score_claim(spec: ScoreClaim, scores: ScoreLookup, retired: Callable[[CellKey], int] | None = None) -> Claim:
+    count = retired or (lambda _key: 0)
     comparisons = tuple(
-        compare_scores(label, _name(better), scores(better), _name(worse), scores(worse))
+        compare_scores(label, _name(better), scores(better), _name(worse), scores(worse), (count(better), count(worse)))
         for label, better, worse in spec.comparisons
     )
     return Claim(spec.text, combine(comparisons), comparisons)

@@ -404,6 +404,7 @@ def render_results(
         else ""
     )
     sections, by_key, figure_metrics, judged = [], {}, {}, []
+    retired_by_key: dict[tuple[str, str, str], int] = {}
     for experiment in EXPERIMENTS.values():
         parts = experiment.build(context)
         section = [f"## {experiment.title}", "", f"{experiment.description} ({experiment.source}.)", ""]
@@ -412,6 +413,7 @@ def render_results(
             results = [collect_cell(cell) for cell in part.cells]
             for result in results:
                 by_key[(part.name, result.cell.agent, result.cell.setting)] = result.scores
+                retired_by_key[(part.name, result.cell.agent, result.cell.setting)] = result.retired
                 judged.append((part.name, result.cell, result.scores))
             all_results += results
             per_part.append(results)
@@ -431,7 +433,7 @@ def render_results(
                     section += [f"![{part.name} learning curves]({curve.relative_to(docs_dir).as_posix()})", ""]
         section += ["Parts:", "", parts_table(parts, statuses), ""]
         sections += section
-    claims = evaluate_claims(lambda key: list(by_key.get(key, [])), figure_metrics.get)
+    claims = evaluate_claims(lambda key: list(by_key.get(key, [])), figure_metrics.get, lambda key: retired_by_key.get(key, 0))
     header = [
         "# Reproduction results",
         "",

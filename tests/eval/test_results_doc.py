@@ -182,6 +182,9 @@ def test_a_comparison_flips_when_the_numbers_flip():
     assert compare_scores("maze", "EBM", [-1.0], "Action FF", [-2.0]).evidence.endswith("no interval")
     missing = compare_scores("reacher", "EBM", [], "Action FF", [-40.0])
     assert missing.verdict == MISSING and "EBM not run yet" in missing.evidence
+    pending = compare_scores("reacher", "EBM", [-40.0], "Action FF", [], retired=(0, 3))
+    assert pending.verdict == MISSING
+    assert pending.evidence == "Action FF rerun pending (3 run(s) made with earlier library defaults)"
 
 
 def test_a_claim_holds_only_when_every_comparison_holds():
@@ -313,3 +316,14 @@ def test_a_figure_made_under_earlier_defaults_is_reported_as_rerun_pending(tmp_p
     text = write_results(tmp_path, tmp_path / "docs" / "results.md").read_text()
     assert "Rerun pending (the figure was made with earlier library defaults): `ebm-eval --experiment obstacle" in text
     assert "| old |" not in text
+
+
+def test_a_claim_names_the_runs_that_wait_for_a_rerun(results):
+    part = parts_of(results, "table1")["table1/particle/online"]
+    for job in cell(part, "action-ff").jobs:
+        metrics = json.loads((job.run_dir / "metrics.json").read_text())
+        metrics["defaults_digest"] = "0000000000000000"  # made before a default changed
+        (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+    text = write_results(results, results / "docs" / "results.md").read_text()
+    expected = "  - particle: not measured (Action FF rerun pending (3 run(s) made with earlier library defaults))"
+    assert expected in text
