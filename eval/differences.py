@@ -118,8 +118,9 @@ EXPLANATIONS: tuple[Explanation, ...] = (
         "torque is, and that the same energy and planner, acting through the env's ground-truth inverse dynamics "
         "instead, reach the target within the first steps of the evaluation episode in which the learned model "
         "drives the finger away. On our torque-driven arm a joint's change of velocity depends on the whole pose "
-        "(the arm's mass matrix), which one global linear fit (RLS) cannot follow; the MLP, like the original's, "
-        "learns on raw, unscaled state dims from the agent's own transitions. The plans also put the finger where "
+        "(the arm's mass matrix), which one global linear fit (RLS) cannot follow. The MLP can learn the arm from "
+        "ordinary transitions but not from the torques at the limits that a planner through a saturating model "
+        "collects (`python scripts/sawyer_inverse_offline.py`, docs/agent.md). The plans also put the finger where "
         "their joints do not (the reason of the other Sawyer EBM cells), pairs of states that no real transition "
         "resembles. The original's RLS ran on the authors' arm, whose inverse dynamics we do not have.",
         setting="RLS",
