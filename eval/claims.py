@@ -390,16 +390,21 @@ def _name(key: CellKey) -> str:
     return f"untrained {name}" if key[2].startswith("untrained") else name
 
 
-def render_claims(claims: Sequence[Claim]) -> str:
+def render_claims(claims: Sequence[Claim], reason: Callable[[str, str], str | None] | None = None) -> str:
     """The claims as a markdown list, each comparison under its claim.
 
     :param claims: from ``evaluate_claims``.
+    :param reason: ``(claim text, comparison label) -> what we know of why it does not hold`` (or None); asked only
+        for comparisons that do not hold or are inconclusive (``eval.differences.claim_reason``).
     :return: markdown.
     """
     lines = []
     for claim in claims:
         lines.append(f"- **{claim.text}**: {claim.verdict}")
-        lines += [f"  - {c.label}: {c.verdict} ({c.evidence})" for c in claim.comparisons]
+        for comparison in claim.comparisons:
+            line = f"  - {comparison.label}: {comparison.verdict} ({comparison.evidence})"
+            why = reason(claim.text, comparison.label) if reason and comparison.verdict in (FAILS, INCONCLUSIVE) else None
+            lines.append(f"{line}. Why: {why}" if why else line)
     return "\n".join(lines)
 
 

@@ -16,6 +16,7 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from eval import stats
+from eval.claims import EXPLORATION_CLAIM, LEARNING_CONTROL, SCORE_CLAIMS
 from eval.parts import Cell
 
 MIN_SEEDS = 3
@@ -222,6 +223,77 @@ def explain(part: str, agent: str, setting: str = "") -> str:
     return "not investigated yet."
 
 
+@dataclass(frozen=True)
+class ClaimReason:
+    """What we know of why one comparison of a claim (``eval.claims``) does not hold or is inconclusive.
+
+    :param claim: the claim's text (``eval.claims.SCORE_CLAIMS``, ``EXPLORATION_CLAIM``, ``LEARNING_CONTROL``).
+    :param label: the comparison's label (an env).
+    :param text: the reason, with its evidence named, and no measured numbers; shown only while the comparison does
+        not hold (a verdict is never written down).
+    """
+
+    claim: str
+    label: str
+    text: str
+
+
+CLAIM_REASONS: tuple[ClaimReason, ...] = (
+    ClaimReason(
+        SCORE_CLAIMS[0].text,
+        "reacher",
+        "online, the EBM stays near the random policy's level on Reacher: its plans move the angles faster than the "
+        "torques allow, and the ground-truth inverse dynamics turns them into little torque (the reason of "
+        "table1/reacher/online, EBM, below). The Action FF plans torques through its own model and needs no inverse "
+        "dynamics.",
+    ),
+    ClaimReason(
+        EXPLORATION_CLAIM,
+        "maze",
+        "not isolated. What the first seed's heatmaps show: the goal-free EBM's visits pile up along the first "
+        "wall (x = -0.5) of the left corridor, whereas the random agent's spread up the corridor. The goal-directed "
+        "maze cells "
+        "end at that wall too, with plans that run through walls the energy hardly knows (the reason of the "
+        "table1/maze cells, below). Not tried yet: other horizons or noise for the goal-free plans.",
+    ),
+    ClaimReason(
+        EXPLORATION_CLAIM,
+        "sawyer",
+        "our Sawyer is a torque-driven build of Metaworld's Sawyer (docs/mujoco_envs.md), on which uniform random "
+        "torques swing the arm across the workspace: at the EBM's budget they occupy about as many voxels as the "
+        "EBM, and about four times as many as random joint targets do (the figure's table below).",
+    ),
+    ClaimReason(
+        LEARNING_CONTROL,
+        "particle",
+        "the untrained EBM already reaches the goal near the optimum on the open particle map (the anchors of Table "
+        "1): its planner and the ground-truth inverse dynamics leave learning nothing to add (docs/agent.md).",
+    ),
+    ClaimReason(
+        LEARNING_CONTROL,
+        "sawyer",
+        "the finger-weighted ground-truth inverse dynamics reaches the target from plans that point the finger at "
+        "it, learned or not (the reason of the Table 2 EBM cells, below).",
+    ),
+    ClaimReason(
+        LEARNING_CONTROL,
+        "maze",
+        "trained or not, the EBM ends at the maze's first wall (the reason of the table1/maze cells, below).",
+    ),
+)
+"""What we know of the comparisons of claims that do not hold, in words and without numbers."""
+
+
+def claim_reason(claim: str, label: str) -> str | None:
+    """The reason of a claim's comparison that does not hold (``eval.claims.render_claims``).
+
+    :param claim: the claim's text.
+    :param label: the comparison's label.
+    :return: the reason, or None when none is written down.
+    """
+    return next((entry.text for entry in CLAIM_REASONS if entry.claim == claim and entry.label == label), None)
+
+
 def find_differences(cells: Sequence[tuple[str, Cell, np.ndarray]]) -> list[Difference]:
     """The cells whose 95% interval excludes the paper's number.
 
@@ -283,4 +355,14 @@ def _describe(difference: Difference) -> str:
     )
 
 
-__all__ = ["EXPLANATIONS", "Difference", "Explanation", "explain", "find_differences", "render_differences"]
+__all__ = [
+    "CLAIM_REASONS",
+    "EXPLANATIONS",
+    "ClaimReason",
+    "Difference",
+    "Explanation",
+    "claim_reason",
+    "explain",
+    "find_differences",
+    "render_differences",
+]

@@ -32,7 +32,7 @@ import numpy as np
 from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
 from eval.claims import evaluate_claims, render_claims
-from eval.differences import find_differences, render_differences
+from eval.differences import claim_reason, find_differences, render_differences
 from eval.estimates import format_duration
 from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, evaluation_env_kwargs, to_plain
@@ -450,7 +450,7 @@ def render_results(
         "",
         "## Claims (judged from the numbers below)",
         "",
-        render_claims(claims),
+        render_claims(claims, claim_reason),
         "",
         *render_differences(find_differences(judged)),
     ]

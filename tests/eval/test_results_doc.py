@@ -327,3 +327,28 @@ def test_a_claim_names_the_runs_that_wait_for_a_rerun(results):
     text = write_results(results, results / "docs" / "results.md").read_text()
     expected = "  - particle: not measured (Action FF rerun pending (3 run(s) made with earlier library defaults))"
     assert expected in text
+
+
+def test_a_comparison_that_does_not_hold_carries_its_reason_and_one_that_holds_none():
+    from eval.claims import SCORE_CLAIMS, render_claims
+    from eval.differences import CLAIM_REASONS, claim_reason
+
+    def lookup(ebm: float):
+        def scores(key):
+            if key[0] == "table1/reacher/online":
+                return [ebm, ebm - 1, ebm - 2] if key[1] == "ebm" else [-25.0, -26.0, -27.0]
+            return []
+
+        return scores
+
+    claim = SCORE_CLAIMS[0].text
+    failing = render_claims(evaluate_claims(lookup(-45.0), lambda part: None), claim_reason)
+    assert f"  - reacher: {FAILS} (" in failing and "). Why: online, the EBM stays near" in failing
+    holding = render_claims(evaluate_claims(lookup(-5.0), lambda part: None), claim_reason)
+    assert f"  - reacher: {HOLDS} (" in holding and "Why:" not in holding  # a verdict is never written down
+    assert claim_reason(claim, "particle") is None
+    # Every reason names a real claim and one of its comparisons.
+    labels = {
+        (c.text, comparison.label) for c in evaluate_claims(lambda key: [], lambda part: None) for comparison in c.comparisons
+    }
+    assert all((entry.claim, entry.label) in labels for entry in CLAIM_REASONS)
