@@ -621,3 +621,29 @@ def test_a_figure_made_under_earlier_defaults_is_retired_and_made_again(tmp_path
     summary = run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     assert summary.figures_ran == [part.name] and figure_state(part) == "complete"
     assert read_provenance(folder)["defaults_digest"] == current
+
+
+def test_the_seeds_of_a_retired_figure_being_made_again_survive_in_the_records(tmp_path, monkeypatch):
+    from eval.experiment_runner import _current_seed_files, figure_state
+    from eval.figures_common import figure_digest
+    from eval.records import restore_records, save_records
+
+    out, records, fresh = tmp_path / "out", tmp_path / "records", tmp_path / "fresh"
+    (part,) = build_parts(["obstacle"], make_context("smoke", str(out)))
+    current, scale = figure_digest("obstacle_generalisation"), {"scale": "smoke", "seeds": list(part.seeds)}
+    _finished_figure(part.figure_dir, scale, {0: "0000000000000000"})  # an old figure, its digest in its seeds
+    (part.figure_dir / "figure_started.json").write_text(json.dumps({"part": part.name, **scale}))
+
+    def stopped_after_its_seed(out_dir, *, seeds, scale):
+        record = {"seed": 0, "result": {}, "defaults_digest": current, "wall_time_s": 1.0}
+        (Path(out_dir) / "seeds" / "obstacle_generalisation_seed0.json").write_text(json.dumps(record))
+        raise RuntimeError("the session ended")
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: stopped_after_its_seed)
+    run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
+    save_records(out, records)
+    restore_records(records, fresh)  # the next session's checkout
+    (moved,) = build_parts(["obstacle"], make_context("smoke", str(fresh)))
+    assert figure_state(moved) == "retired"  # the old figure.json still does not pass for a current one
+    kept = _current_seed_files(moved.figure_dir, "obstacle_generalisation")
+    assert [path.name for path in kept] == ["obstacle_generalisation_seed0.json"]  # resumed, not trained again
