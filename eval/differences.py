@@ -252,9 +252,8 @@ CLAIM_REASONS: tuple[ClaimReason, ...] = (
         "maze",
         "not isolated. What the first seed's heatmaps show: the goal-free EBM's visits pile up along the first "
         "wall (x = -0.5) of the left corridor, whereas the random agent's spread up the corridor. The goal-directed "
-        "maze cells "
-        "end at that wall too, with plans that run through walls the energy hardly knows (the reason of the "
-        "table1/maze cells, below). Not tried yet: other horizons or noise for the goal-free plans.",
+        "maze cells end at that wall too, with plans that run through walls the energy hardly knows (the reason of "
+        "the table1/maze cells, below). Not tried yet: other horizons or noise for the goal-free plans.",
     ),
     ClaimReason(
         EXPLORATION_CLAIM,
