@@ -11,6 +11,7 @@ import io
 import json
 import pathlib
 import pickle
+import warnings
 import zipfile
 import zlib
 from collections.abc import Iterable
@@ -158,6 +159,7 @@ class CheckpointMixin(_MixinBase):
             "num_timesteps": int(self.num_timesteps),
             "buffers": {},
             "generators": [],
+            "generator_devices": {},
             "inverse_model": None,
         }
         for name in self.checkpoint_buffers:
@@ -169,6 +171,7 @@ class CheckpointMixin(_MixinBase):
             if isinstance(generator, torch.Generator):
                 arrays[f"{name}.state"] = generator.get_state().numpy()
                 meta["generators"].append(name)
+                meta["generator_devices"][name] = generator.device.type
         meta["inverse_model"] = self._numpy_inverse_state(arrays)
         return arrays, meta
 
@@ -312,10 +315,22 @@ class CheckpointMixin(_MixinBase):
             if buffer is None:
                 raise ValueError(f"{source} holds a replay buffer {name!r} that {type(self).__name__} does not have.")
             buffer.load_state_dict(_join_state(name, entries, arrays))
+        saved_devices = meta.get("generator_devices", {})
         for name in meta.get("generators", []):
             generator = getattr(self, name, None)
-            if isinstance(generator, torch.Generator):
-                generator.set_state(torch.from_numpy(arrays[f"{name}.state"].copy()))
+            if not isinstance(generator, torch.Generator):
+                continue
+            saved = saved_devices.get(name, generator.device.type)  # files before 2026-12-04 were all written on CPU
+            if saved != generator.device.type:
+                # A CUDA generator's state (Philox) means nothing to a CPU generator (Mersenne twister) and vice versa.
+                warnings.warn(
+                    f"{source}: the random generator {name!r} was saved on {saved} and this agent runs on "
+                    f"{generator.device.type}; it keeps its fresh seeding, so the resumed run draws other noise than "
+                    f"one continued on {saved}. Load with device={saved!r} to resume the same stream.",
+                    stacklevel=3,
+                )
+                continue
+            generator.set_state(torch.from_numpy(arrays[f"{name}.state"].copy()))
         inverse = getattr(self, "inverse_model", None)
         if meta.get("inverse_model") is not None and inverse is not None:
             inverse.load_state_dict(_join_state("inverse_model", meta["inverse_model"], arrays))

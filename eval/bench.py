@@ -302,14 +302,16 @@ def bench_compile(device: torch.device, repeats: int) -> dict[str, float]:
     return {"first_ms": first, **{name: statistics.median(values) for name, values in times.items()}}
 
 
-def learn_worker(agent: str, steps: int, threads: int) -> dict[str, float]:
+def learn_worker(agent: str, steps: int, threads: int, device: str = "cpu") -> dict[str, float]:
     """
     Run one ``learn`` in this process and measure it (called in a subprocess by :func:`bench_learn`).
 
     :param agent: ``"ebm"`` or ``"ppo"``.
     :param steps: total_timesteps passed to ``learn``.
     :param threads: torch CPU threads.
-    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb"}.
+    :param device: the torch device both agents train on (``"cpu"`` or ``"cuda"``).
+    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb", "gpu_peak_mb"}; ``gpu_peak_mb`` is
+        ``torch.cuda.max_memory_allocated`` on CUDA and 0 on the CPU.
     """
     import gymnasium as gym
 
@@ -321,11 +323,11 @@ def learn_worker(agent: str, steps: int, threads: int) -> dict[str, float]:
     if agent == "ebm":
         from ebm_agent import EBMPlannerAgent
 
-        model = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu")
+        model = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device=device)
     elif agent == "ppo":
         from stable_baselines3 import PPO
 
-        model = PPO("MultiInputPolicy", env, seed=0, device="cpu")
+        model = PPO("MultiInputPolicy", env, seed=0, device=device)
     else:
         raise ValueError(f"agent must be 'ebm' or 'ppo', got {agent!r}.")
     rss_before = _peak_rss_mb()
@@ -333,7 +335,14 @@ def learn_worker(agent: str, steps: int, threads: int) -> dict[str, float]:
     model.learn(steps)
     seconds = time.perf_counter() - begin
     rss_peak = _peak_rss_mb()
-    return {"seconds": seconds, "timesteps": float(model.num_timesteps), "rss_before_mb": rss_before, "rss_peak_mb": rss_peak}
+    gpu_peak = torch.cuda.max_memory_allocated() / 2**20 if torch.device(device).type == "cuda" else 0.0
+    return {
+        "seconds": seconds,
+        "timesteps": float(model.num_timesteps),
+        "rss_before_mb": rss_before,
+        "rss_peak_mb": rss_peak,
+        "gpu_peak_mb": gpu_peak,
+    }
 
 
 def _peak_rss_mb() -> float:
@@ -346,18 +355,19 @@ def _peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
-def bench_learn(steps: int, threads: int) -> dict[str, dict[str, float]]:
+def bench_learn(steps: int, threads: int, device: str = "cpu") -> dict[str, dict[str, float]]:
     """
     ``learn(steps)`` of the EBM agent and of PPO, each in a fresh subprocess so that peak memory is its own.
 
     :param steps: total_timesteps of each.
     :param threads: torch CPU threads of each.
+    :param device: the torch device both train on.
     :return: per agent, what :func:`learn_worker` measured.
     """
     results = {}
     for agent in ("ebm", "ppo"):
         command = [sys.executable, "-m", "eval.bench", "--learn-worker", agent, "--learn-steps", str(steps)]
-        command += ["--threads", str(threads)]
+        command += ["--threads", str(threads), "--learn-device", device]
         done = subprocess.run(command, capture_output=True, text=True, check=False)
         if done.returncode != 0:
             raise RuntimeError(f"the {agent} learn worker failed:\n{done.stderr[-3000:]}")
@@ -375,6 +385,13 @@ def _machine() -> str:
     load = ", ".join(f"{value:.1f}" for value in os.getloadavg()) if hasattr(os, "getloadavg") else "n/a"
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     return f"{model}, {cores} cores available, load average {load} at the start"
+
+
+def _cuda_line() -> str:
+    if not torch.cuda.is_available():
+        return "not available (CPU rows only)"
+    cuda = torch.version.cuda or "unknown"
+    return f"{torch.cuda.get_device_name(0)} (CUDA {cuda}, {torch.cuda.device_count()} device(s))"
 
 
 def _plan_table(rows: Sequence[PlanTiming], compare: bool) -> list[str]:
@@ -396,18 +413,19 @@ def _plan_table(rows: Sequence[PlanTiming], compare: bool) -> list[str]:
     return lines
 
 
-def _learn_table(results: dict[str, dict[str, float]], steps: int) -> list[str]:
-    lines = [
+def _learn_table(results: dict[str, dict[str, float]], steps: int, gpu: bool = False) -> list[str]:
+    header = (
         "| agent | learn(total_timesteps) | transitions run | seconds | transitions / s | 50k extrapolated (min) | "
-        "peak RSS before learn (MB) | peak RSS (MB) |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+        "peak RSS before learn (MB) | peak RSS (MB) |" + (" peak CUDA memory (MB) |" if gpu else "")
+    )
+    lines = [header, "|---" * (header.count("|") - 1) + "|"]
     for agent, label in (("ebm", "EBMPlannerAgent"), ("ppo", "PPO")):
         result = results[agent]
         rate = result["timesteps"] / result["seconds"]
         lines.append(
             f"| {label} | {steps} | {int(result['timesteps'])} | {result['seconds']:.1f} | {rate:.1f} | "
             f"{50_000 / rate / 60:.1f} | {result['rss_before_mb']:.0f} | {result['rss_peak_mb']:.0f} |"
+            + (f" {result.get('gpu_peak_mb', 0.0):.0f} |" if gpu else "")
         )
     ebm_rate = results["ebm"]["timesteps"] / results["ebm"]["seconds"]
     ppo_rate = results["ppo"]["timesteps"] / results["ppo"]["seconds"]
@@ -437,18 +455,34 @@ def main(argv: Sequence[str] | None = None) -> None:
         default=None,
         help="also time these MPPIConfig.chunk_transitions on the grid's CPU cases larger than one chunk (e.g. 1024 4096)",
     )
+    parser.add_argument(
+        "--devices",
+        nargs="+",
+        choices=("cpu", "cuda"),
+        default=None,
+        help="where to time the plans (default: the CPU, and CUDA when available)",
+    )
+    parser.add_argument(
+        "--learn-device", choices=("cpu", "cuda"), default="cpu", help="the device both agents train on in the learn section"
+    )
     parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.learn_worker:
-        print(json.dumps(learn_worker(args.learn_worker, args.learn_steps, args.threads)))
+        print(json.dumps(learn_worker(args.learn_worker, args.learn_steps, args.threads, args.learn_device)))
         return
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    cuda_asked = "cuda" in (args.devices or []) or args.learn_device == "cuda"
+    if cuda_asked and not torch.cuda.is_available():
+        parser.error("CUDA was asked for (--devices cuda or --learn-device cuda) but torch sees no CUDA device here")
 
     torch.set_num_threads(args.threads)
     theirs_version = pytorch_mppi_version()
     compare = theirs_version is not None
-    devices = [torch.device("cpu")] + ([torch.device("cuda")] if torch.cuda.is_available() else [])
+    if args.devices is None:
+        devices = [torch.device("cpu")] + ([torch.device("cuda")] if torch.cuda.is_available() else [])
+    else:
+        devices = [torch.device(name) for name in dict.fromkeys(args.devices)]
     grid = QUICK_GRID if args.quick else FULL_GRID
     cases = [DEFAULT_CASE] + [
         (d, k, t, i) for d in grid["state_dims"] for k in grid["samples"] for t in grid["horizons"] for i in grid["iterations"]
@@ -461,7 +495,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"- Date: {datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')}",
         f"- Machine: {_machine()}; torch threads: {args.threads}",
         f"- torch {torch.__version__}; pytorch-mppi {theirs_version or 'not installed'}; Python {platform.python_version()}",
-        f"- CUDA: {torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'not available (CPU rows only)'}",
+        f"- CUDA: {_cuda_line()}",
         f"- Grid: {'quick' if args.quick else 'full'}; medians of {args.repeats} plans per variant after one warm-up, "
         "variants interleaved; one env (N=1).",
         *(f"- Note: {note}" for note in args.note),
@@ -477,7 +511,7 @@ def main(argv: Sequence[str] | None = None) -> None:
             rows.append(row)
             print(_plan_table([row], True)[-1], flush=True)
     report += _plan_table(rows, compare)
-    native = "has" if native_bf16(devices[0]) else "does not have"
+    native = "has" if native_bf16(torch.device("cpu")) else "does not have"
     report += [
         "",
         "What is timed: see the docstring of `eval/bench.py`. `theirs / ours` > 1 means our planner is faster; only ratios",
@@ -525,9 +559,10 @@ def main(argv: Sequence[str] | None = None) -> None:
             f"{timings['eager_ms'] / timings['compiled_ms']:.2f}x |",
         ]
     if args.learn_steps > 0:
-        results = bench_learn(args.learn_steps, args.threads)
-        report += ["", f"## learn throughput ({ENV_ID}, CPU, {args.threads} threads, one process each)", ""]
-        report += _learn_table(results, args.learn_steps)
+        results = bench_learn(args.learn_steps, args.threads, args.learn_device)
+        where = "CUDA" if args.learn_device == "cuda" else "CPU"
+        report += ["", f"## learn throughput ({ENV_ID}, {where}, {args.threads} threads, one process each)", ""]
+        report += _learn_table(results, args.learn_steps, gpu=args.learn_device == "cuda")
         report += [
             "",
             "PPO collects whole rollouts of n_steps=2048, so it runs at least 2048 transitions whatever total_timesteps.",

@@ -436,3 +436,21 @@ def test_same_seed_gives_identical_evaluation_scores_and_other_seeds_differ(agen
     first = scores(7)
     np.testing.assert_array_equal(first, scores(7))
     assert not np.array_equal(first, scores(8))
+
+
+def test_a_generator_saved_on_another_device_is_not_restored_and_the_load_says_so(tmp_path):
+    agent = make_agent(EBMPlannerAgent)
+    agent.learn(30)
+    path = agent.save_checkpoint(tmp_path / "ckpt.zip")
+    arrays, meta = read_training_state(path)
+    assert meta["generator_devices"] == {"_generator": "cpu"}
+    resumed = resumable(EBMPlannerAgent).load_checkpoint(path, env=gym.make("ebm/Particle-v0"))
+    assert torch.equal(resumed._generator.get_state(), agent._generator.get_state())
+    fresh = resumed._generator.manual_seed(123).get_state()
+    meta["generator_devices"] = {"_generator": "cuda"}  # as a checkpoint written by an agent on a GPU reads
+    with pytest.warns(UserWarning, match="saved on cuda and this agent runs on cpu.*device='cuda'"):
+        resumed._restore_training_state(arrays, meta, path)
+    assert torch.equal(resumed._generator.get_state(), fresh)  # kept its own seeding, no crash on the state's size
+    del meta["generator_devices"]  # a checkpoint written before the devices were recorded: CPU, restored as before
+    resumed._restore_training_state(arrays, meta, path)
+    assert torch.equal(resumed._generator.get_state(), agent._generator.get_state())

@@ -1,0 +1,101 @@
+"""The CUDA path of the agents and the planner: train, save and load across devices, and no host syncs per iteration.
+
+Every test here needs a CUDA device and skips without one (CI has none); they run on the lent GPU machine.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import envs  # noqa: F401  (registers the ids)
+from baselines.action_ff import ActionFFAgent
+from ebm_agent import EBMPlannerAgent
+from ebm_agent.costs import GaussianGoalEnergy, PlanCost
+from ebm_agent.energy import EnergyModel
+from ebm_agent.mppi import MPPIConfig, MPPIPlanner
+
+pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+
+FAST_KWARGS = {
+    EBMPlannerAgent: {
+        "horizon": 5,
+        "planner_config": {"num_samples": 16, "iterations": 4},
+        "online": {"adaptive_iterations": False, "pos_buffer_size": 10_000},
+        "image_log_interval": 0,
+    },
+    ActionFFAgent: {
+        "horizon": 5,
+        "planner_config": {"num_samples": 16, "iterations": 4},
+        "online": {"pos_buffer_size": 10_000},
+    },
+}
+
+
+@pytest.mark.parametrize("agent_class", list(FAST_KWARGS))
+def test_an_agent_trained_on_cuda_saves_and_loads_on_cuda_and_on_the_cpu(agent_class, tmp_path) -> None:
+    agent = agent_class("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=0, device="cuda", **FAST_KWARGS[agent_class])
+    agent.learn(80)
+    assert all(p.device.type == "cuda" for p in agent.policy.parameters())
+    obs, _ = gym.make("ebm/Particle-v0").reset(seed=3)
+    action, _ = agent.predict(obs, deterministic=True)
+    agent.save(tmp_path / "agent.zip")
+    again = agent_class.load(tmp_path / "agent.zip", env=gym.make("ebm/Particle-v0"), device="cuda")
+    np.testing.assert_array_equal(again.predict(obs, deterministic=True)[0], action)
+    on_cpu = agent_class.load(tmp_path / "agent.zip", env=gym.make("ebm/Particle-v0"), device="cpu")
+    assert all(p.device.type == "cpu" for p in on_cpu.policy.parameters())
+    cpu_action, _ = on_cpu.predict(obs, deterministic=True)
+    assert cpu_action.shape == action.shape and np.all(np.isfinite(cpu_action))
+    on_cpu.learn(20)  # a CUDA-trained model keeps learning on the CPU
+
+
+def test_a_cuda_checkpoint_resumes_on_cuda_with_its_generator_and_on_the_cpu_with_a_warning(tmp_path) -> None:
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=0, device="cuda", **FAST_KWARGS[EBMPlannerAgent]
+    )
+    agent.learn(60)
+    path = agent.save_checkpoint(tmp_path / "ckpt.zip")
+    resumed = EBMPlannerAgent.load_checkpoint(path, env=gym.make("ebm/Particle-v0"), device="cuda")
+    assert torch.equal(resumed._generator.get_state(), agent._generator.get_state())
+    with pytest.warns(UserWarning, match="saved on cuda and this agent runs on cpu"):
+        on_cpu = EBMPlannerAgent.load_checkpoint(path, env=gym.make("ebm/Particle-v0"), device="cpu")
+    assert on_cpu.num_timesteps == 60
+    on_cpu.learn(20, reset_num_timesteps=False)
+    assert on_cpu.num_timesteps == 80
+
+
+def _syncs_of_a_plan(iterations: int, autocast: str | None) -> int:
+    """Synchronising CUDA calls during one plan, as counted by torch's sync debug mode."""
+    torch.manual_seed(0)
+    cost = PlanCost(EnergyModel(3).cuda(), GaussianGoalEnergy((0, 1, 2)))
+    config = MPPIConfig(horizon=10, num_samples=64, iterations=iterations, autocast=autocast, chunk_transitions=200)
+    planner = MPPIPlanner(config, 3, [-1.0] * 3, [1.0] * 3, device="cuda")
+    start, goals = torch.zeros(2, 3, device="cuda"), torch.full((2, 3), 0.5, device="cuda")
+    generator = torch.Generator(device="cuda").manual_seed(0)
+    planner.plan(start, goals, cost, generator=generator)  # warm-up outside the count
+    torch.cuda.synchronize()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        torch.cuda.set_sync_debug_mode("warn")
+        try:
+            planner.plan(start, goals, cost, generator=generator)
+        finally:
+            torch.cuda.set_sync_debug_mode("default")
+    return sum("synchroniz" in str(w.message) for w in caught)
+
+
+@pytest.mark.parametrize("autocast", [None, "bf16"])
+def test_cuda_iterations_never_synchronise_with_the_host(autocast: str | None) -> None:
+    # Validation at the boundary may sync once per plan; six iterations must sync no more than one.
+    assert _syncs_of_a_plan(6, autocast) == _syncs_of_a_plan(1, autocast)
+
+
+def test_the_learn_benchmark_measures_cuda_memory() -> None:
+    from eval.bench import learn_worker
+
+    result = learn_worker("ebm", 64, threads=1, device="cuda")
+    assert result["timesteps"] >= 64 and result["gpu_peak_mb"] > 0
