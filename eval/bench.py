@@ -2,10 +2,11 @@
 
 Prints markdown tables, all measured in the same run so that the ratios compare like with like on a loaded machine:
 
-1. **Plan time**: ms per ``MPPIPlanner.plan`` (one env) over a grid of state dims D, candidates K, horizons T and
-   iterations I, in float32 and with ``autocast="bf16"``, next to ``pytorch_mppi.MPPI`` on the equivalent problem
-   and the ratio. The variants are timed interleaved, repeat by repeat, and the table shows medians. The default
-   precision (``autocast="auto"``) is one of the two, named in the report.
+1. **Plan time**: ms per ``MPPIPlanner.plan`` (one env, or N in one plan with ``--envs N``) over a grid of state dims
+   D, candidates K, horizons T and iterations I, in float32 and with ``autocast="bf16"``, next to ``pytorch_mppi.MPPI``
+   (``MPPI_Batched`` for N > 1) on the equivalent problem and the ratio. The variants are timed interleaved, repeat
+   by repeat, and the table shows medians. The default precision (``autocast="auto"``) is one of the two, named in
+   the report.
 2. **Plan quality in bf16** (``--quality N``): the float32 cost of N particle plans made in bf16 and in float32 with
    the same noise, next to float32 plans made with other noise: bf16 should move the cost less than a new seed does.
 3. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
@@ -107,14 +108,16 @@ def _timed(fn: Callable[[], object], device: torch.device) -> float:
     return 1000.0 * (time.perf_counter() - begin)
 
 
-def _ours(state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, **options: object):
+def _ours(
+    state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, num_envs: int = 1, **options: object
+):
     torch.manual_seed(0)
     energy = EnergyModel(state_dim).to(device)  # the paper's 3 x 128 LeakyReLU MLP
     cost = PlanCost(energy, GaussianGoalEnergy(tuple(range(state_dim))))
     config = MPPIConfig(horizon=horizon, num_samples=samples, iterations=iterations, **options)  # type: ignore[arg-type]
     planner = MPPIPlanner(config, state_dim, state_low=-torch.ones(state_dim), state_high=torch.ones(state_dim), device=device)
-    start = torch.zeros(1, state_dim, device=device)
-    goals = torch.full((1, state_dim), 0.5, device=device)
+    start = torch.zeros(num_envs, state_dim, device=device)  # [N, D]
+    goals = torch.full((num_envs, state_dim), 0.5, device=device)  # [N, D]
     generator = torch.Generator(device=device).manual_seed(0)
     return lambda: planner.plan(start, goals, cost, generator=generator)
 
@@ -130,7 +133,7 @@ class _Dynamics(nn.Module):
         return states + self.net(torch.cat([states, actions], dim=-1))
 
 
-def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device):
+def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, num_envs: int = 1):
     from pytorch_mppi import MPPI
 
     torch.manual_seed(0)
@@ -140,9 +143,7 @@ def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device:
     def running_cost(states: Tensor, actions: Tensor) -> Tensor:
         return (states - goal).square().sum(-1) + 0.1 * actions.square().sum(-1)
 
-    controller = MPPI(
-        dynamics,
-        running_cost,
+    common: dict[str, Any] = dict(
         nx=state_dim,
         noise_sigma=0.1 * torch.eye(state_dim, device=device),
         num_samples=samples,
@@ -152,7 +153,21 @@ def _theirs(state_dim: int, samples: int, horizon: int, iterations: int, device:
         u_min=-torch.ones(state_dim, device=device),
         u_max=torch.ones(state_dim, device=device),
     )
-    state = torch.zeros(state_dim, device=device)
+    controller: Any
+    if num_envs == 1:
+        controller = MPPI(dynamics, running_cost, **common)
+        state = torch.zeros(state_dim, device=device)  # [D]
+    else:
+        import pytorch_mppi
+
+        if not hasattr(pytorch_mppi, "MPPI_Batched"):
+            raise RuntimeError(
+                f"--envs {num_envs} compares with pytorch-mppi's MPPI_Batched, which this pytorch-mppi "
+                f"({pytorch_mppi_version()}) lacks: pip install 'pytorch-mppi>=0.9.1'."
+            )
+        # N envs in one dynamics call per step ([N*K, D] rows), pytorch-mppi's own batched controller.
+        controller = pytorch_mppi.MPPI_Batched(dynamics, running_cost, num_envs=num_envs, **common)
+        state = torch.zeros(num_envs, state_dim, device=device)  # [N, D]
 
     def plan() -> None:
         with torch.inference_mode():
@@ -174,10 +189,19 @@ def _interleaved_medians(variants: dict[str, Callable[[], object]], device: torc
 
 
 def bench_plan(
-    state_dim: int, samples: int, horizon: int, iterations: int, device: torch.device, repeats: int, compare: bool
+    state_dim: int,
+    samples: int,
+    horizon: int,
+    iterations: int,
+    device: torch.device,
+    repeats: int,
+    compare: bool,
+    num_envs: int = 1,
 ) -> PlanTiming:
     """
     Time one problem size: ours (float32 and bf16 autocast) and pytorch-mppi, interleaved, after one warm-up each.
+
+    With ``num_envs`` N > 1 ours plans the N envs in one call and pytorch-mppi runs its ``MPPI_Batched``.
 
     :param state_dim: D.
     :param samples: K.
@@ -186,14 +210,15 @@ def bench_plan(
     :param device: the device to plan on.
     :param repeats: timed plans per variant; the median is kept.
     :param compare: also time pytorch-mppi.
-    :return: the median times.
+    :param num_envs: N, the envs planned at once.
+    :return: the median times (of one plan for all N envs).
     """
     variants = {
-        "ours": _ours(state_dim, samples, horizon, iterations, device, autocast=None),
-        "bf16": _ours(state_dim, samples, horizon, iterations, device, autocast="bf16"),
+        "ours": _ours(state_dim, samples, horizon, iterations, device, num_envs, autocast=None),
+        "bf16": _ours(state_dim, samples, horizon, iterations, device, num_envs, autocast="bf16"),
     }
     if compare:
-        variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device)
+        variants["theirs"] = _theirs(state_dim, samples, horizon, iterations, device, num_envs)
     medians = _interleaved_medians(variants, device, repeats)
     return PlanTiming(
         str(device), state_dim, samples, horizon, iterations, medians["ours"], medians["bf16"], medians.get("theirs")
@@ -465,6 +490,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--learn-device", choices=("cpu", "cuda"), default="cpu", help="the device both agents train on in the learn section"
     )
+    parser.add_argument("--envs", type=int, default=1, help="N, the envs of each timed plan (one batched plan)")
     parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.learn_worker:
@@ -472,6 +498,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         return
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
+    if args.envs < 1:
+        parser.error("--envs must be >= 1")
     cuda_asked = "cuda" in (args.devices or []) or args.learn_device == "cuda"
     if cuda_asked and not torch.cuda.is_available():
         parser.error("CUDA was asked for (--devices cuda or --learn-device cuda) but torch sees no CUDA device here")
@@ -497,7 +525,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         f"- torch {torch.__version__}; pytorch-mppi {theirs_version or 'not installed'}; Python {platform.python_version()}",
         f"- CUDA: {_cuda_line()}",
         f"- Grid: {'quick' if args.quick else 'full'}; medians of {args.repeats} plans per variant after one warm-up, "
-        "variants interleaved; one env (N=1).",
+        "variants interleaved; "
+        + ("one env (N=1)." if args.envs == 1 else f"N={args.envs} envs in each plan (pytorch-mppi: MPPI_Batched)."),
         *(f"- Note: {note}" for note in args.note),
         "",
         "## Plan time (ms per plan)",
@@ -507,7 +536,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     rows = []
     for device in devices:
         for case in cases:
-            row = bench_plan(*case, device=device, repeats=args.repeats, compare=compare)
+            row = bench_plan(*case, device=device, repeats=args.repeats, compare=compare, num_envs=args.envs)
             rows.append(row)
             print(_plan_table([row], True)[-1], flush=True)
     report += _plan_table(rows, compare)
