@@ -5,8 +5,8 @@ Prints markdown tables, all measured in the same run so that the ratios compare 
 1. **Plan time**: ms per ``MPPIPlanner.plan`` (one env, or N in one plan with ``--envs N``) over a grid of state dims
    D, candidates K, horizons T and iterations I, in float32 and with ``autocast="bf16"``, next to ``pytorch_mppi.MPPI``
    (``MPPI_Batched`` for N > 1) on the equivalent problem and the ratio. The variants are timed interleaved, repeat
-   by repeat, and the table shows medians. The default precision (``autocast="auto"``) is one of the two, named in
-   the report.
+   by repeat, and the table shows medians. The agent's default precision is float32 (``autocast=None``), the
+   first of the two.
 2. **Plan quality in bf16** (``--quality N``): the float32 cost of N particle plans made in bf16 and in float32 with
    the same noise, next to float32 plans made with other noise: bf16 should move the cost less than a new seed does.
 3. **torch.compile**: the first plan (compilation included) and the median of later plans for one configuration.
