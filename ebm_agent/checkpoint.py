@@ -320,7 +320,7 @@ class CheckpointMixin(_MixinBase):
             generator = getattr(self, name, None)
             if not isinstance(generator, torch.Generator):
                 continue
-            saved = saved_devices.get(name, generator.device.type)  # files before 2026-12-04 were all written on CPU
+            saved = saved_devices.get(name, generator.device.type)  # older files: as before
             if saved != generator.device.type:
                 # A CUDA generator's state (Philox) means nothing to a CPU generator (Mersenne twister) and vice versa.
                 warnings.warn(
