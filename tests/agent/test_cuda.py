@@ -12,29 +12,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from test_agent_contract import FAST_KWARGS  # the contract tests' fast settings (tests/agent is on sys.path)
 
 import envs  # noqa: F401  (registers the ids)
-from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
 from ebm_agent.costs import GaussianGoalEnergy, PlanCost
 from ebm_agent.energy import EnergyModel
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 
 pytestmark = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-
-FAST_KWARGS = {
-    EBMPlannerAgent: {
-        "horizon": 5,
-        "planner_config": {"num_samples": 16, "iterations": 4},
-        "online": {"adaptive_iterations": False, "pos_buffer_size": 10_000},
-        "image_log_interval": 0,
-    },
-    ActionFFAgent: {
-        "horizon": 5,
-        "planner_config": {"num_samples": 16, "iterations": 4},
-        "online": {"pos_buffer_size": 10_000},
-    },
-}
 
 
 @pytest.mark.parametrize("agent_class", list(FAST_KWARGS))
