@@ -57,9 +57,10 @@ def fit(model: torch.nn.Module, states: np.ndarray, next_states: np.ndarray, act
     :param actions: [B, 7].
     :return: ``{group: {"error": float, "change": float}}``.
     """
+    device = next(model.parameters()).device  # a model loaded on a GPU machine is on CUDA
     with torch.no_grad():
-        predicted = model(torch.as_tensor(states, dtype=torch.float32), torch.as_tensor(actions, dtype=torch.float32))
-    predicted = predicted.numpy()  # [B, 20]
+        predicted = model(*(torch.as_tensor(a, dtype=torch.float32, device=device) for a in (states, actions)))
+    predicted = predicted.cpu().numpy()  # [B, 20]
     return {
         group: {
             "error": float(np.abs(predicted - next_states)[:, dims].mean()),

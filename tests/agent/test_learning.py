@@ -25,9 +25,9 @@ def energy_gap(agent: EBMPlannerAgent, low: float, high: float, seed: int = 0) -
     feasible = states + rng.uniform(-0.05, 0.05, size=(512, 2)).astype(np.float32)
     jumps = (states + rng.choice([-1, 1], size=(512, 2)) * rng.uniform(low, high, size=(512, 2))).astype(np.float32)
     with torch.no_grad():
-        energy = agent.policy.energy
-        possible = energy(torch.as_tensor(states), torch.as_tensor(feasible)).mean()
-        impossible = energy(torch.as_tensor(states), torch.as_tensor(jumps)).mean()
+        energy, on = agent.policy.energy, (lambda array: torch.as_tensor(array, device=agent.device))
+        possible = energy(on(states), on(feasible)).mean()
+        impossible = energy(on(states), on(jumps)).mean()
     return float(impossible - possible)
 
 

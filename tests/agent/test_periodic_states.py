@@ -68,7 +68,8 @@ def test_action_ff_sees_the_same_circle_features_and_a_wrapped_error():
     torch.testing.assert_close(model.error(predicted, real), torch.tensor([[-0.02, 0.0, 0.0, 0.0]]), atol=1e-6, rtol=0)
     agent.learn(total_timesteps=60)
     with torch.inference_mode():
-        states, actions = torch.rand(7, 4) * 2 - 1, torch.rand(7, 2) * 2 - 1
+        states = torch.rand(7, 4, device=agent.device) * 2 - 1  # [7, 4]
+        actions = torch.rand(7, 2, device=agent.device) * 2 - 1  # [7, 2]
         fast = model.inference_evaluator()
         assert fast is not None
         torch.testing.assert_close(fast(states, actions), model(states, actions), atol=1e-5, rtol=1e-5)

@@ -51,7 +51,10 @@ def resumable(agent_class):
 
 
 def make_agent(agent_class, env=None, seed=0, **kwargs):
+    """An agent with the fast settings, on the CPU (also on a GPU machine): bit-identical resumes are a CPU guarantee;
+    CUDA kernels may sum in another order from run to run (the CUDA resume test is in tests/agent/test_cuda.py)."""
     env = gym.make("ebm/Particle-v0") if env is None else env
+    kwargs.setdefault("device", "cpu")
     return resumable(agent_class)("MultiInputPolicy", env, seed=seed, **{**FAST_KWARGS[agent_class], **kwargs})
 
 

@@ -42,8 +42,9 @@ def test_action_ff_pretrained_on_random_particle_transitions_reaches_the_goal_re
 
 def _one_step_error(agent: ActionFFAgent, dataset) -> float:
     with torch.no_grad():
-        predicted = agent.policy.dynamics(torch.as_tensor(dataset.states[:2000]), torch.as_tensor(dataset.actions[:2000]))
-    return float(np.abs(predicted.numpy() - dataset.next_states[:2000]).mean())
+        states, actions = (torch.as_tensor(a[:2000], device=agent.device) for a in (dataset.states, dataset.actions))
+        predicted = agent.policy.dynamics(states, actions)  # [2000, D]
+    return float(np.abs(predicted.cpu().numpy() - dataset.next_states[:2000]).mean())
 
 
 @pytest.mark.parametrize("env_id", ["ebm/Particle-v0", "ebm/Maze-v0", "ebm/Reacher-v0", "ebm/SawyerReach-v0"])
@@ -144,5 +145,6 @@ def test_a_model_saved_before_standardized_outputs_existed_loads_as_trained_with
 
 def _predict(agent: ActionFFAgent, dataset) -> np.ndarray:
     with torch.no_grad():
-        predicted = agent.dynamics_model(torch.as_tensor(dataset.states[:2000]), torch.as_tensor(dataset.actions[:2000]))
-    return predicted.numpy()
+        states, actions = (torch.as_tensor(a[:2000], device=agent.device) for a in (dataset.states, dataset.actions))
+        predicted = agent.dynamics_model(states, actions)  # [2000, D]
+    return predicted.cpu().numpy()
