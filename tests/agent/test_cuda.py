@@ -92,7 +92,23 @@ def test_the_learn_benchmark_measures_cuda_memory() -> None:
     assert result["timesteps"] >= 64 and result["gpu_peak_mb"] > 0
 
 
-def test_a_cuda_run_resumed_mid_plan_follows_the_uninterrupted_run(tmp_path) -> None:
+# The contract tests' settings, and tests/agent/test_reliability.py's (smaller plans, a negative buffer that wraps):
+# on 2026-12-04 the reliability module's resume test, then run on CUDA, ended with weights unequal to the
+# uninterrupted run's, whereas this test with the contract settings matched bit for bit; the second case is here
+# to tell whether that was the settings or the run (it has not run on a GPU yet).
+RESUME_SETTINGS = {
+    "contract": FAST_KWARGS[EBMPlannerAgent],
+    "reliability": {
+        "horizon": 3,
+        "planner_config": {"num_samples": 8, "iterations": 2},
+        "online": {"adaptive_iterations": False, "pos_buffer_size": 1_000, "neg_buffer_size": 500},
+        "image_log_interval": 0,
+    },
+}
+
+
+@pytest.mark.parametrize("settings", list(RESUME_SETTINGS))
+def test_a_cuda_run_resumed_mid_plan_follows_the_uninterrupted_run(settings, tmp_path) -> None:
     # On the CPU the resumed run is bit-identical (tests/agent/test_reliability.py). CUDA kernels may sum in another
     # order from run to run, so here the resumed run must be as close to the uninterrupted one as a second
     # uninterrupted run is, and make the same number of plans.
@@ -101,7 +117,7 @@ def test_a_cuda_run_resumed_mid_plan_follows_the_uninterrupted_run(tmp_path) -> 
 
     def fresh():
         venv = make_vec_env("ebm/Particle-v0", n_envs=1, seed=0)
-        return EBMPlannerAgent("MultiInputPolicy", venv, seed=0, device="cuda", **FAST_KWARGS[EBMPlannerAgent]), venv
+        return EBMPlannerAgent("MultiInputPolicy", venv, seed=0, device="cuda", **RESUME_SETTINGS[settings]), venv
 
     def gap(first, second) -> float:
         pairs = zip(first.policy.state_dict().values(), second.policy.state_dict().values(), strict=True)

@@ -50,11 +50,16 @@ def resumable(agent_class):
     return type(agent_class.__name__, (CheckpointMixin, agent_class), {"__module__": __name__})
 
 
+@pytest.fixture(autouse=True)
+def _on_the_cpu(monkeypatch):
+    """Every agent of this module, and every load, on the CPU, also on a GPU machine (where ``device="auto"`` would
+    pick CUDA): the bit-identical resumes tested here compare CPU generator states and CPU runs. The CUDA resume is
+    tested in tests/agent/test_cuda.py."""
+    monkeypatch.setattr(torch.cuda, "is_available", lambda: False)
+
+
 def make_agent(agent_class, env=None, seed=0, **kwargs):
-    """An agent with the fast settings, on the CPU (also on a GPU machine): bit-identical resumes are a CPU guarantee;
-    CUDA kernels may sum in another order from run to run (the CUDA resume test is in tests/agent/test_cuda.py)."""
     env = gym.make("ebm/Particle-v0") if env is None else env
-    kwargs.setdefault("device", "cpu")
     return resumable(agent_class)("MultiInputPolicy", env, seed=seed, **{**FAST_KWARGS[agent_class], **kwargs})
 
 
