@@ -308,6 +308,19 @@ def _pin_recorded_digest(folder: Path, figure: str) -> None:
         write_provenance(folder, str(record.get("command", "unknown")), **{**fields_, "defaults_digest": stale[0]})
 
 
+def figure_seeds_kept(part: Part) -> list[int]:
+    """The part's seeds already made under today's defaults and kept in its folder (``seeds/*.json``), which the
+    next ``ebm-eval --experiment`` reuses: the progress of a figure that is not finished, or is being made again.
+
+    :param part: a figure part.
+    :return: those seeds, sorted; only seeds the part asks for.
+    """
+    if part.figure is None:
+        return []
+    seeds = {(read_json_dict(path) or {}).get("seed") for path in _current_seed_files(part.figure_dir, str(part.figure))}
+    return sorted(seed for seed in seeds if isinstance(seed, int) and seed in part.seeds)
+
+
 def _current_seed_files(folder: Path, figure: str) -> list[Path]:
     """The kept seeds (``seeds/*.json``) a resumed figure reuses: those made under today's defaults (the figure
     computes the others again, ``eval.figures_common.seed_result``)."""

@@ -330,16 +330,23 @@ def figure_section(part: Part, figures_dir: Path, docs_dir: Path) -> list[str]:
     :param docs_dir: the document's folder (links are relative to it).
     :return: markdown lines.
     """
-    from eval.experiment_runner import figure_state
+    from eval.experiment_runner import figure_seeds_kept, figure_state
 
     lines = []
     if part.paper:
         lines += ["Paper: " + ", ".join(f"{label} {value:g}" for label, value in part.paper.items()) + ".", ""]
     state = figure_state(part)
+    kept = figure_seeds_kept(part) if state != "complete" else []
+    progress = (
+        f" Seeds already made under today's defaults and kept for it: {', '.join(map(str, kept))} "
+        f"(of {', '.join(map(str, part.seeds))})."
+        if kept
+        else ""
+    )
     if state == "retired":
-        return [*lines, f"Rerun pending (the figure was made with earlier library defaults): `{part.command()}`"]
+        return [*lines, f"Rerun pending (the figure was made with earlier library defaults): `{part.command()}`.{progress}"]
     if state != "complete":
-        return [*lines, f"Not run yet: `{part.command()}`"]
+        return [*lines, f"Not run yet: `{part.command()}`.{progress}"]
     figure = json.loads((part.figure_dir / "figure.json").read_text())
     if figure.get("table_md"):
         lines += [str(figure["table_md"]).strip(), ""]

@@ -316,6 +316,18 @@ def test_a_figure_made_under_earlier_defaults_is_reported_as_rerun_pending(tmp_p
     text = write_results(tmp_path, tmp_path / "docs" / "results.md").read_text()
     assert "Rerun pending (the figure was made with earlier library defaults): `ebm-eval --experiment obstacle" in text
     assert "| old |" not in text
+    assert "Seeds already made" not in text  # none kept yet
+
+    from eval.figures_common import figure_digest
+
+    (folder / "seeds").mkdir()
+    current = figure_digest("obstacle_generalisation")
+    for seed, digest in ((0, current), (1, "0000000000000000"), (2, current), (7, current)):
+        record = {"seed": seed, "defaults_digest": digest}
+        (folder / "seeds" / f"obstacle_generalisation_seed{seed}.json").write_text(json.dumps(record))
+    text = write_results(tmp_path, tmp_path / "docs" / "results.md").read_text()
+    # Seed 1 was made under other defaults and seed 7 is not one of the part's: neither counts.
+    assert "Seeds already made under today's defaults and kept for it: 0, 2 (of 0, 1, 2)." in text
 
 
 def test_a_claim_names_the_runs_that_wait_for_a_rerun(results):
