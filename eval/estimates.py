@@ -35,6 +35,12 @@ plans torques and needs no inverse dynamics, which is most of the EBM's Sawyer s
 135-142 s per 10,000 steps (0.014 a step) and its online fixed-goal run (seed 0, 2026-12-02, two processes on 2
 cores) 18.4 min to its last curve evaluation, of which about 700 s were the 50,000 evaluation steps."""
 
+COLLECT_SHARE = 2.0
+"""A directed collection's step costs about this many learning steps of the env (``SECONDS_PER_STEP``): the Sawyer's
+100,000 directed transitions of seed 0 took 10,715 s of one core (0.107 s a step, 2026-12-03, AMD host, beside other
+processes, resumed three times), twice the online run's 0.053. The collecting EBM's replay grows to 100,000
+transitions, twice the online run's, and it never pauses for the cheaper evaluation steps."""
+
 PPO_SECONDS_PER_STEP = 0.001
 """Rough CPU seconds per PPO transition (docs/benchmarks.md: about 2,000 transitions/s on the particle)."""
 
@@ -42,7 +48,7 @@ SECONDS_PER_OFFLINE_UPDATE = {"ebm": 0.02, "action-ff": 0.003}
 """Rough CPU seconds per ``learn_offline`` minibatch of 256."""
 
 FIGURE_SECONDS_PER_SEED = {
-    "obstacle_generalisation": 2700.0,
+    "obstacle_generalisation": 5400.0,
     "plan_diversity": 400.0,
     "reacher_directions": 600.0,
     "maze_exploration": 950.0,
@@ -51,11 +57,12 @@ FIGURE_SECONDS_PER_SEED = {
 }
 """Rough CPU seconds of a figure per seed at the paper's scale (the figure trains its own agents). plan_diversity,
 reacher_directions, maze_exploration and energy_maps from their recorded wall times (2026-12-01 and 2026-12-02; the
-energy maps: 48 min for 3 seeds, each an online EBM on the particle and a goal-free one on the maze). The others from
-what they train: obstacle_generalisation an EBM and an Action FF online for 50,000 particle transitions each (the
-Table 1 particle online runs took 1,000-1,400 s each); sawyer_exploration from its seed 0 (2026-12-03: 4,668 s with one
-torch thread beside another process; the earlier guess from ``SECONDS_PER_STEP`` was 3,000 s). The earlier guess of
-900 s for obstacle_generalisation was 3x low."""
+energy maps: 48 min for 3 seeds, each an online EBM on the particle and a goal-free one on the maze);
+sawyer_exploration from its seed 0 (2026-12-03: 4,668 s with one torch thread beside another process; the earlier
+guess from ``SECONDS_PER_STEP`` was 3,000 s); obstacle_generalisation, an EBM and an Action FF online for 50,000
+particle transitions each with evaluations in and out of the box, from its seeds 0 and 2 under today's defaults
+(2026-12-04: 89.6 and 91 min, one torch thread beside another process on the Intel host; the guesses before them,
+900 s and then 2,700 s from the Table 1 particle runs, were 6x and 2x low)."""
 
 
 def _episode_length(job: Job) -> int:
@@ -89,7 +96,9 @@ def estimate_job_seconds(job: Job) -> float:
     repeat = job.offline_kwargs.get("repeat", 100) if sequential else 1
     batch = job.offline_kwargs.get("batch_size", 256)
     updates = epochs * math.ceil(job.timesteps * repeat / batch)
-    collect = 0.0 if job.dataset == "random" else job.timesteps * SECONDS_PER_STEP.get(job.env_short, 0.01) / 2
+    # one collection per seed serves both agents of the seed, so each job is charged half of it
+    collect_step = SECONDS_PER_STEP.get(job.env_short, 0.01) * COLLECT_SHARE
+    collect = 0.0 if job.dataset == "random" else job.timesteps * collect_step / 2
     return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + collect + extra * job.eval_episodes * episode * act
 
 
@@ -172,6 +181,7 @@ def _first_number(paths: Iterable[Path], key: str) -> float | None:
 
 __all__ = [
     "ACTING_SHARE",
+    "COLLECT_SHARE",
     "FIGURE_SECONDS_PER_SEED",
     "PPO_SECONDS_PER_STEP",
     "SECONDS_PER_OFFLINE_UPDATE",
