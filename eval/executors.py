@@ -68,7 +68,8 @@ class LocalExecutor:
     :param jobs: number of jobs run at once (worker processes).
     :param runner: the function run per job; it must be importable by name (picklable) for ``jobs > 1``.
     :param threads_per_job: torch threads of each run: of each worker process, or of this process for ``jobs=1``
-        (None: 1 per worker, and torch's own setting in-process, every core by default). Several processes on the
+        and for the figures that run in it (None: 1 per worker, and torch's own setting in-process, every core by
+        default). Several processes on the
         same cores, each with torch's default, oversubscribe them: give each 1.
     """
 
@@ -83,6 +84,16 @@ class LocalExecutor:
             raise ValueError(f"threads_per_job must be a positive integer or None, got {threads_per_job!r}")
         self.threads_per_job = threads_per_job
 
+    def limit_this_process(self) -> None:
+        """Give this process ``threads_per_job`` torch threads (nothing when it is None).
+
+        For the work that runs in this process: the runs of ``jobs=1``, and the figure parts of ``ebm-eval
+        --experiment`` (``eval.experiment_runner.run_parts``), which would otherwise take every core beside other
+        processes that were told to share them.
+        """
+        if self.threads_per_job is not None:
+            _limit_threads(self.threads_per_job)
+
     def map(self, jobs: Sequence[Job], progress: bool = True) -> list[JobResult]:
         """Run every job; see ``Executor.map``.
 
@@ -95,8 +106,7 @@ class LocalExecutor:
             return []
         with tqdm(total=len(jobs), desc="ebm-eval jobs", unit="job", disable=not progress) as bar:
             if self.jobs == 1:
-                if self.threads_per_job is not None:
-                    _limit_threads(self.threads_per_job)
+                self.limit_this_process()
                 results: list[JobResult] = []
                 for job in jobs:
                     if any(result.status == "stopped" for result in results):  # a signal stopped the sweep

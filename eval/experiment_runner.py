@@ -6,10 +6,10 @@
   ``seed_<k>.replaced-<fingerprint>`` (never deleted) before the new one runs.
 - Jobs of all selected parts run through one executor (``--jobs N`` processes, or Ray); runs shared by several
   parts (Table 2's online fixed-goal runs) run once.
-- Figure parts call their ``eval.figures`` function in this process; a figure folder with a ``figure.json`` made at
-  the same scale and seeds is complete. An unfinished figure of the same part, scale and seeds (its
-  ``figure_started.json``) is resumed: the seeds it finished (``<folder>/seeds/``, ``eval.figures_common.seed_result``)
-  are kept, so a figure longer than one session finishes over several.
+- Figure parts call their ``eval.figures`` function in this process (with the local executor's ``--threads``); a
+  figure folder with a ``figure.json`` made at the same scale and seeds is complete. An unfinished figure of the same
+  part, scale and seeds (its ``figure_started.json``) is resumed: the seeds it finished (``<folder>/seeds/``,
+  ``eval.figures_common.seed_result``) are kept, so a figure longer than one session finishes over several.
 - Every run and figure folder gets a ``provenance.json`` (command, part, date), and ``<out>/sessions.jsonl`` one
   line per invocation (command, machine, start, wall time, what ran, was skipped or failed), which
   ``eval.results_doc`` reports.
@@ -163,7 +163,12 @@ def run_parts(
             log(f"{result.status} {result.run_dir}: {(result.error or '').strip().splitlines()[-1:]}")
     if any(result.status == "stopped" for result in summary.ran):  # SIGTERM or Ctrl-C (eval.stop)
         log("ebm-eval: stopped by a signal, the figures of this command not started: run it again to resume")
-    else:
+    elif any(part.figure is not None for part in parts):
+        # Figures train their agents in this process: with the local executor, at its threads per run (--threads),
+        # not at torch's default of every core, which oversubscribes the cores that other processes share.
+        limit = getattr(executor, "limit_this_process", None)
+        if callable(limit):
+            limit()
         for part in parts:
             if part.figure is not None:
                 _run_figure(part, command, summary, log)

@@ -185,8 +185,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--threads",
         type=positive_int,
-        help="torch threads of each run with the local executor (default: torch's own, every core, for --jobs 1; "
-        "1 per run otherwise); give 1 to each of several ebm-eval processes that share the cores",
+        help="torch threads of each run, and of the figures (which run in the ebm-eval process), with the local "
+        "executor (default: torch's own, every core, for --jobs 1 and figures; 1 per run otherwise); give 1 to each "
+        "of several ebm-eval processes that share the cores",
     )
     parser.add_argument(
         "--executor",

@@ -291,6 +291,29 @@ def test_a_figure_part_runs_once_through_eval_figures(tmp_path, monkeypatch):
     assert again.figures_skipped == ["plan_diversity/particle"] and len(calls) == 1
 
 
+def test_a_figure_runs_at_the_local_executors_threads(tmp_path, monkeypatch):
+    # Figures train in the ebm-eval process: --threads must reach them, not only the runs of jobs=1.
+    import torch
+
+    from eval.executors import LocalExecutor
+
+    seen = []
+
+    def fake_figure(out_dir, *, seeds, scale):
+        seen.append(torch.get_num_threads())
+        (Path(out_dir) / "figure.json").write_text(json.dumps({"name": "plan_diversity", "pngs": [], "command": "x"}))
+
+    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: fake_figure)
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
+        run_parts(parts, LocalExecutor(jobs=1, threads_per_job=1), "ebm-eval fig", progress=False, log=lambda _m: None)
+    finally:
+        torch.set_num_threads(before)
+    assert seen == [1]
+
+
 class StoppedExecutor(FakeExecutor):
     """Every run comes back stopped, as after SIGTERM (``eval.stop``)."""
 
