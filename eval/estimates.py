@@ -76,7 +76,11 @@ def _episode_length(job: Job) -> int:
 
 
 def estimate_job_seconds(job: Job) -> float:
-    """A rough CPU-seconds estimate of one job (learning, its directed dataset if any, evaluations).
+    """A rough CPU-seconds estimate of one job's own work: learning and evaluations.
+
+    A directed dataset that the job learns from is not included: the EBM and Action FF of a seed, and the directed
+    and directed + sequential parts, share one collection per seed (``estimate_collection_seconds``), which
+    ``estimate_jobs_seconds`` counts once.
 
     :param job: the job.
     :return: seconds.
@@ -96,14 +100,44 @@ def estimate_job_seconds(job: Job) -> float:
     repeat = job.offline_kwargs.get("repeat", 100) if sequential else 1
     batch = job.offline_kwargs.get("batch_size", 256)
     updates = epochs * math.ceil(job.timesteps * repeat / batch)
-    # one collection per seed serves both agents of the seed, so each job is charged half of it
-    collect_step = SECONDS_PER_STEP.get(job.env_short, 0.01) * COLLECT_SHARE
-    collect = 0.0 if job.dataset == "random" else job.timesteps * collect_step / 2
-    return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + collect + extra * job.eval_episodes * episode * act
+    return updates * SECONDS_PER_OFFLINE_UPDATE.get(job.agent, 0.01) + extra * job.eval_episodes * episode * act
+
+
+def estimate_collection_seconds(job: Job) -> float:
+    """A rough CPU-seconds estimate of the directed collection that a pretrained job learns from (0 for none).
+
+    :param job: the job.
+    :return: seconds of the whole collection (``job.timesteps`` directed steps, ``COLLECT_SHARE``).
+    """
+    if job.mode != "pretrained" or job.dataset == "random":
+        return 0.0
+    return job.timesteps * SECONDS_PER_STEP.get(job.env_short, 0.01) * COLLECT_SHARE
+
+
+def estimate_jobs_seconds(jobs: Iterable[Job]) -> float:
+    """A rough CPU-seconds estimate of several jobs, with each directed collection they share counted once.
+
+    :param jobs: the jobs (a run listed twice is counted twice: deduplicate by ``run_dir`` first).
+    :return: seconds.
+    """
+    from eval.pretraining import dataset_path
+
+    total = 0.0
+    collections: dict[Path, float] = {}  # one per env, size, seed and collector: its cache file
+    for job in jobs:
+        total += estimate_job_seconds(job)
+        collect = estimate_collection_seconds(job)
+        if collect:
+            collections[dataset_path(job)] = collect
+    return total + sum(collections.values())
 
 
 def estimate_part_seconds(part: Part) -> float:
     """A rough CPU-seconds estimate of a part (one process; ``--jobs N`` divides the wall time).
+
+    A part is charged every directed collection it needs, though another part may already have made it (the
+    directed and directed + sequential parts of Table 2 share theirs); ``estimate_jobs_seconds`` counts them once
+    over several parts.
 
     :param part: the part.
     :return: seconds.
@@ -111,7 +145,7 @@ def estimate_part_seconds(part: Part) -> float:
     if part.figure is not None:
         factor = 1.0 if part.scale == "paper" else 0.01
         return FIGURE_SECONDS_PER_SEED.get(part.figure, 600.0) * len(part.seeds) * factor
-    return sum(estimate_job_seconds(job) for job in part.jobs)
+    return estimate_jobs_seconds(part.jobs)
 
 
 def format_duration(seconds: float) -> str:
@@ -187,7 +221,9 @@ __all__ = [
     "SECONDS_PER_OFFLINE_UPDATE",
     "SECONDS_PER_STEP",
     "MeasuredCost",
+    "estimate_collection_seconds",
     "estimate_job_seconds",
+    "estimate_jobs_seconds",
     "estimate_part_seconds",
     "format_duration",
     "measured_part_cost",

@@ -26,7 +26,7 @@ from dataclasses import replace
 from fnmatch import fnmatchcase
 from pathlib import Path
 
-from eval.estimates import estimate_job_seconds, estimate_part_seconds, format_duration, measured_part_cost
+from eval.estimates import estimate_jobs_seconds, estimate_part_seconds, format_duration, measured_part_cost
 from eval.jobs import Job
 from eval.parts import (
     SCALES,
@@ -343,7 +343,8 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
     figures = 0.0
     for experiment in EXPERIMENTS.values():
         parts = experiment.build(context)
-        cost = sum(estimate_part_seconds(part) for part in parts)
+        runs = {job.run_dir: job for part in parts for job in part.jobs}
+        cost = estimate_jobs_seconds(runs.values()) + sum(estimate_part_seconds(p) for p in parts if p.figure)
         for part in parts:
             unique_jobs.update((job.run_dir, job) for job in part.jobs)
             figures += estimate_part_seconds(part) if part.figure else 0.0
@@ -355,11 +356,11 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
             measured = measured_part_cost(part, measured_from) if measured_from else None
             line = f"{line} {measured.describe()}" if measured else line.rstrip()
             lines.append(line + _in_progress(part))
-    total = figures + sum(estimate_job_seconds(job) for job in unique_jobs.values())
+    total = figures + estimate_jobs_seconds(unique_jobs.values())
     lines += [
         "",
         f"all: {len(unique_jobs)} runs and {sum(1 for _ in EXPERIMENTS)} experiments, ~{format_duration(total)} "
-        "of CPU time (runs shared by experiments counted once)",
+        "of CPU time (runs and directed collections shared by parts counted once)",
     ]
     return "\n".join(lines)
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from eval.estimates import (
     MeasuredCost,
+    estimate_collection_seconds,
     estimate_job_seconds,
+    estimate_jobs_seconds,
     estimate_part_seconds,
     format_duration,
     measured_part_cost,
@@ -87,10 +91,26 @@ def test_a_directed_seed_is_priced_at_least_its_measured_collection(tmp_path):
     part = _part(tmp_path, "table2/sawyer/pretrained_directed")
     seed0 = [job for job in part.jobs if job.seed == 0]
     assert sorted(job.agent for job in seed0) == ["action-ff", "ebm"]
-    total = sum(estimate_job_seconds(job) for job in seed0)
+    total = estimate_jobs_seconds(seed0)
     assert 10_000 < total < 16_000
     random = _part(tmp_path, "table2/sawyer/pretrained_random")
-    assert sum(estimate_job_seconds(job) for job in random.jobs if job.seed == 0) < total / 5  # nothing to collect
+    assert estimate_jobs_seconds(job for job in random.jobs if job.seed == 0) < total / 5  # nothing to collect
+
+
+def test_the_directed_parts_share_one_collection_per_seed(tmp_path):
+    # The directed and directed + sequential parts learn from the same cached collection (eval.pretraining): each
+    # part alone is charged it, the two together once, and so are the experiment's and the listing's totals.
+    directed = _part(tmp_path, "table2/sawyer/pretrained_directed")
+    sequential = _part(tmp_path, "table2/sawyer/pretrained_directed_sequential")
+    collections = sum(estimate_collection_seconds(job) for job in directed.jobs if job.agent == "ebm")
+    assert collections > 3 * 10_000  # three seeds of 100,000 directed Sawyer steps
+    both = estimate_jobs_seconds([*directed.jobs, *sequential.jobs])
+    alone = estimate_part_seconds(directed) + estimate_part_seconds(sequential)
+    assert both == pytest.approx(alone - collections)
+    text = describe_experiments(make_context("paper", str(tmp_path)))
+    table2 = next(line for line in text.splitlines() if line.startswith("table2 "))
+    parts = sum(estimate_part_seconds(part) for part in build_parts(["table2"], make_context("paper", str(tmp_path))))
+    assert table2.endswith(f"~{format_duration(parts - collections)}")
 
 
 def test_the_obstacle_figure_is_priced_at_its_measured_seeds(tmp_path):
