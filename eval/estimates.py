@@ -12,6 +12,7 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from eval.jobs import Job
 from eval.parts import Part
@@ -165,16 +166,24 @@ class MeasuredCost:
     :param finished: runs (or figures) found finished.
     :param total: runs (or figures) of the part.
     :param unit: what was counted, ``runs`` or ``figure``.
+    :param retired: of the finished ones, those made under earlier library defaults (``eval.provenance.is_current_run``,
+        ``eval.experiment_runner.figure_state``): their time is measured, but ``ebm-eval --experiment`` makes them
+        again.
     """
 
     seconds: float
     finished: int
     total: int
     unit: str = "runs"
+    retired: int = 0
 
     def describe(self) -> str:
-        """``measured 1.3 h (6/6 runs)``; the time of one process, so ``--jobs 2`` halves the wall time of runs."""
-        return f"measured {format_duration(self.seconds)} ({self.finished}/{self.total} {self.unit})"
+        """``measured 1.3 h (6/6 runs)``, ``measured 1.6 h (2/6 runs, 1 under earlier defaults: to rerun)``; the
+        time of one process, so ``--jobs 2`` halves the wall time of runs."""
+        text = f"measured {format_duration(self.seconds)} ({self.finished}/{self.total} {self.unit}"
+        if self.retired:
+            text += f", {self.retired} under earlier defaults: to rerun"
+        return text + ")"
 
 
 def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCost | None:
@@ -186,30 +195,46 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
     :param folders: results or records folders, searched in order.
     :return: the measured cost, or None when nothing of the part has finished.
     """
+    from eval.experiment_runner import recorded_figure_digests
+    from eval.figures_common import figure_digest
+    from eval.provenance import defaults_digest, job_fingerprint
+
     out_dir = Path(part.out_dir)
     if part.figure is not None:
         relative = part.figure_dir.relative_to(out_dir)
-        seconds = _first_number((Path(folder) / relative / "provenance.json" for folder in folders), "wall_time_s")
-        return None if seconds is None else MeasuredCost(seconds, 1, 1, "figure")
+        found = _first_number((Path(folder) / relative / "provenance.json" for folder in folders), "wall_time_s")
+        if found is None:
+            return None
+        seconds, record, path = found
+        current = figure_digest(str(part.figure))
+        old = current is not None and any(d != current for d in recorded_figure_digests(path.parent, record))
+        return MeasuredCost(seconds, 1, 1, "figure", int(old))
     jobs = part.jobs
-    total, finished = 0.0, 0
+    total, finished, retired = 0.0, 0, 0
     for job in jobs:
         relative = job.run_dir.relative_to(out_dir)
-        seconds = _first_number((Path(folder) / relative / "metrics.json" for folder in folders), "wall_time_s")
-        if seconds is not None:
+        found = _first_number((Path(folder) / relative / "metrics.json" for folder in folders), "wall_time_s")
+        if found is not None:
+            seconds, metrics, _path = found
             total += seconds
             finished += 1
-    return MeasuredCost(total, finished, len(jobs)) if finished else None
+            # the same job (fingerprint) made under other defaults, as eval.results_doc counts a rerun pending
+            digest = metrics.get("defaults_digest")
+            same_job = metrics.get("fingerprint") == job_fingerprint(job)
+            retired += int(same_job and digest is not None and digest != defaults_digest(job))
+    return MeasuredCost(total, finished, len(jobs), retired=retired) if finished else None
 
 
-def _first_number(paths: Iterable[Path], key: str) -> float | None:
+def _first_number(paths: Iterable[Path], key: str) -> tuple[float, dict[str, Any], Path] | None:
+    """The first file of ``paths`` that holds a finite number under ``key``: (the number, the file's JSON, its path)."""
     for path in paths:
         try:
-            value = json.loads(path.read_text()).get(key)
+            record = json.loads(path.read_text())
+            value = record.get(key)
         except (OSError, ValueError, AttributeError):
             continue
         if isinstance(value, int | float) and math.isfinite(value):
-            return float(value)
+            return float(value), record, path
     return None
 
 

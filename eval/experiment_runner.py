@@ -231,12 +231,18 @@ def figure_state(part: Part) -> str:
     if record.get("scale") != part.scale or list(record.get("seeds", [])) != list(part.seeds):
         return "missing"
     current = figure_digest(str(part.figure))
-    recorded = _recorded_figure_digests(folder, record)
+    recorded = recorded_figure_digests(folder, record)
     return "retired" if current is not None and any(digest != current for digest in recorded) else "complete"
 
 
-def _recorded_figure_digests(folder: Path, record: dict[str, Any]) -> set[str]:
-    """The defaults digests a finished figure was made under: its provenance's, else its kept seeds'."""
+def recorded_figure_digests(folder: Path | str, record: dict[str, Any]) -> set[str]:
+    """The defaults digests a finished figure was made under: its provenance's, else its kept seeds'.
+
+    :param folder: the figure's folder (in a results folder or the records).
+    :param record: its ``provenance.json``.
+    :return: the digests (empty for a figure finished before it recorded any).
+    """
+    folder = Path(folder)
     if isinstance(record.get("defaults_digest"), str):
         return {record["defaults_digest"]}
     seeds = [read_json_dict(path) or {} for path in sorted((folder / SEED_FOLDER).glob("*.json"))]
@@ -307,7 +313,7 @@ def _pin_recorded_digest(folder: Path, figure: str) -> None:
     record = read_provenance(folder) or {}
     if isinstance(record.get("defaults_digest"), str):
         return
-    stale = sorted(_recorded_figure_digests(folder, record) - {figure_digest(figure)})
+    stale = sorted(recorded_figure_digests(folder, record) - {figure_digest(figure)})
     if stale:
         fields_ = {key: value for key, value in record.items() if key != "command"}
         write_provenance(folder, str(record.get("command", "unknown")), **{**fields_, "defaults_digest": stale[0]})

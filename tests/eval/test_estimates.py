@@ -51,6 +51,31 @@ def test_a_figure_is_measured_by_the_wall_time_of_its_command(tmp_path):
     assert cost.describe() == "measured 19 min (1/1 figure)"
 
 
+def test_runs_and_figures_made_under_earlier_defaults_are_measured_and_named_to_rerun(tmp_path):
+    from eval.figures_common import figure_digest
+    from eval.provenance import defaults_digest, job_fingerprint
+
+    part = _part(tmp_path, "table2/sawyer/pretrained_directed")
+    current, old, other = part.jobs[0], part.jobs[1], part.jobs[2]
+    for job, digest in ((current, defaults_digest(current)), (old, "0" * 16), (other, "0" * 16)):
+        job.run_dir.mkdir(parents=True)
+        fingerprint = job_fingerprint(job) if job is not other else "another configuration"
+        metrics = {"wall_time_s": 600.0, "fingerprint": fingerprint, "defaults_digest": digest}
+        (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+    cost = measured_part_cost(part, [tmp_path])
+    assert cost == MeasuredCost(1_800.0, 3, len(part.jobs), retired=1)  # the same job under other defaults only
+    assert cost.describe() == "measured 30 min (3/6 runs, 1 under earlier defaults: to rerun)"
+
+    figure = _part(tmp_path, "obstacle/particle")
+    figure.figure_dir.mkdir(parents=True)
+    record = {"wall_time_s": 17_280.0, "defaults_digest": figure_digest("obstacle_generalisation")}
+    (figure.figure_dir / "provenance.json").write_text(json.dumps(record))
+    assert measured_part_cost(figure, [tmp_path]) == MeasuredCost(17_280.0, 1, 1, "figure")
+    (figure.figure_dir / "provenance.json").write_text(json.dumps({**record, "defaults_digest": "0" * 16}))
+    retired = measured_part_cost(figure, [tmp_path])
+    assert retired is not None and retired.describe() == "measured 4.8 h (1/1 figure, 1 under earlier defaults: to rerun)"
+
+
 def test_the_listing_prints_measured_times_beside_the_estimates(tmp_path):
     part = _part(tmp_path, "table1/maze/online")
     for job in part.jobs:
