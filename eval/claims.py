@@ -10,6 +10,11 @@ evaluation; exploration figures by part) and ``evaluate_claims`` reads them thro
   overlap; with fewer seeds a higher mean holds and the evidence says that no interval was computed.
 - A claim over several envs does not hold when any measured comparison does not, is "not measured" while a
   comparison lacks its runs, is "inconclusive" while any comparison is, and holds when every comparison holds.
+- A change claim (Table 2's sequential ablation) compares how much two agents' scores change from one setting to
+  another: the first agent's change of mean, ``mean(after) - mean(before)``, must be the higher (the smaller drop).
+  With at least 3 seeds in each of the four cells it holds when the two changes' 95% bootstrap intervals separate
+  (``eval.stats.bootstrap_difference_ci``, each cell's seeds resampled on their own) and is "inconclusive" when
+  they overlap; with fewer seeds the means decide and the evidence says so.
 - The exploration claim reads the exploration figures' metrics (``eval.figures``) at equal transitions: maze
   coverage of the EBM vs the random agent after the same budget, Sawyer finger occupancy of the EBM at its budget
   vs each random explorer's occupancy at that same budget, against the strongest random explorer (highest mean).
@@ -113,7 +118,66 @@ SCORE_CLAIMS = (
         (("sawyer", ("table2/sawyer/online_fixed", "ebm", "online fixed"), ("sawyer_ppo/1x", "ppo", "PPO 1x")),),
     ),
 )
-"""The claims decided by table cells."""
+"""The claims decided by table cells (issue 6's "must show")."""
+
+DIRECTED_CLAIMS = (
+    ScoreClaim(
+        "Pretrained on the Sawyer, the EBM learns more from directed data than from random data (paper Sec. 4.2: "
+        "random interactions cover too few states; -4438 against -9569)",
+        (
+            (
+                "sawyer",
+                ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
+                ("table2/sawyer/pretrained_random", "ebm", "pretrained random"),
+            ),
+        ),
+    ),
+    ScoreClaim(
+        "Pretrained on directed data, the EBM beats Action FF on the Sawyer (paper: slightly, -4438 against -5041)",
+        (
+            (
+                "sawyer",
+                ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
+                ("table2/sawyer/pretrained_directed", "action-ff", "pretrained directed"),
+            ),
+        ),
+    ),
+)
+"""Table 2's findings on pretraining data (paper Sec. 4.2), decided as the score claims are."""
+
+
+@dataclass(frozen=True)
+class ChangeClaim:
+    """A claim that a change of setting costs one agent less than another: its score changes by more (drops less).
+
+    :param text: the claim.
+    :param comparisons: (env label, (the first agent's cell before, after), (the other agent's cell before, after)).
+    """
+
+    text: str
+    comparisons: tuple[tuple[str, tuple[CellKey, CellKey], tuple[CellKey, CellKey]], ...]
+
+
+CHANGE_CLAIMS = (
+    ChangeClaim(
+        "Trained on the directed data in sequential, correlated batches instead of shuffled ones, the EBM's score "
+        "drops less than Action FF's on the Sawyer (paper Sec. 4.2: by 676 against 7797)",
+        (
+            (
+                "sawyer",
+                (
+                    ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
+                    ("table2/sawyer/pretrained_directed_sequential", "ebm", "pretrained directed + sequential"),
+                ),
+                (
+                    ("table2/sawyer/pretrained_directed", "action-ff", "pretrained directed"),
+                    ("table2/sawyer/pretrained_directed_sequential", "action-ff", "pretrained directed + sequential"),
+                ),
+            ),
+        ),
+    ),
+)
+"""Table 2's sequential ablation (paper Sec. 4.2): the drop from shuffled to sequential batches, EBM vs Action FF."""
 
 CONTROL_CLAIMS = (
     ScoreClaim(
@@ -221,6 +285,50 @@ def compare_seeds(
             verdict = INCONCLUSIVE
     else:
         evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds on a side, no interval"
+    return Comparison(label, verdict, evidence)
+
+
+def compare_changes(
+    label: str,
+    name: str,
+    change: tuple[Sequence[float], Sequence[float]],
+    other_name: str,
+    other_change: tuple[Sequence[float], Sequence[float]],
+    setting_names: tuple[str, str] = ("before", "after"),
+) -> Comparison:
+    """Whether the first agent's score changes by more (drops less) than the other's between two settings.
+
+    :param label: what is compared (an env).
+    :param name: the first agent's name.
+    :param change: its per-seed scores (before [seeds], after [seeds]), none empty.
+    :param other_name: the other agent's name.
+    :param other_change: its per-seed scores (before, after), none empty.
+    :param setting_names: the two settings, for the evidence.
+    :return: ``HOLDS`` when the first change is higher and, with 3 seeds in every cell, the two changes' 95% intervals
+        separate; ``INCONCLUSIVE`` when it is higher but they overlap; else ``FAILS``.
+    """
+    sides = []
+    for agent, (before, after) in ((name, change), (other_name, other_change)):
+        first, second = np.asarray(before, dtype=np.float64), np.asarray(after, dtype=np.float64)
+        delta = stats.mean(second) - stats.mean(first)
+        seeds = min(len(first), len(second))
+        interval = stats.bootstrap_difference_ci(first, second) if seeds >= MIN_SEEDS_FOR_CI else None
+        text = f"{agent} {delta:+.2f}"
+        if interval is not None:
+            text += f" [95% CI {interval[0]:+.2f}, {interval[1]:+.2f}]"
+        counts = f"{len(first)} and {len(second)} seed{'s' if max(len(first), len(second)) > 1 else ''}"
+        text += f" ({stats.mean(first):.2f} to {stats.mean(second):.2f}; {counts})"
+        sides.append((delta, interval, text))
+    (delta_a, interval_a, text_a), (delta_b, interval_b, text_b) = sides
+    verdict = HOLDS if delta_a > delta_b else FAILS
+    evidence = f"change from {setting_names[0]} to {setting_names[1]}: {text_a} vs {text_b}"
+    if interval_a is not None and interval_b is not None:
+        separate = interval_a[0] > interval_b[1] or interval_b[0] > interval_a[1]
+        evidence += "; the 95% intervals separate" if separate else "; the 95% intervals overlap"
+        if verdict == HOLDS and not separate:
+            verdict = INCONCLUSIVE
+    else:
+        evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds in a cell, no interval"
     return Comparison(label, verdict, evidence)
 
 
@@ -343,6 +451,8 @@ def evaluate_claims(
         else:
             exploration.append(_exploration_comparison(label, part, metrics, *pair))
     claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
+    claims += [_score_claim(spec, scores, retired) for spec in DIRECTED_CLAIMS]
+    claims += [_change_claim(spec, scores, retired) for spec in CHANGE_CLAIMS]
     claims += [_score_claim(spec, scores, retired) for spec in CONTROL_CLAIMS]
     return claims
 
@@ -378,11 +488,41 @@ def _exploration_comparison(
 
 def _score_claim(spec: ScoreClaim, scores: ScoreLookup, retired: Callable[[CellKey], int] | None = None) -> Claim:
     count = retired or (lambda _key: 0)
-    comparisons = tuple(
-        compare_scores(label, _name(better), scores(better), _name(worse), scores(worse), (count(better), count(worse)))
-        for label, better, worse in spec.comparisons
-    )
-    return Claim(spec.text, combine(comparisons), comparisons)
+    comparisons = []
+    for label, better, worse in spec.comparisons:
+        names = _name(better), _name(worse)
+        if names[0] == names[1]:  # the same agent in two settings: name the settings
+            names = f"{names[0]} ({better[2]})", f"{names[1]} ({worse[2]})"
+        counts = count(better), count(worse)
+        comparisons.append(compare_scores(label, names[0], scores(better), names[1], scores(worse), counts))
+    return Claim(spec.text, combine(comparisons), tuple(comparisons))
+
+
+def _change_claim(spec: ChangeClaim, scores: ScoreLookup, retired: Callable[[CellKey], int] | None = None) -> Claim:
+    count = retired or (lambda _key: 0)
+    comparisons = []
+    for label, cells, other_cells in spec.comparisons:
+        missing = [cell for cell in (*cells, *other_cells) if len(scores(cell)) == 0]
+        if missing:
+            phrases = [
+                f"{_name(cell)} {cell[2]} rerun pending ({count(cell)} run(s) made with earlier library defaults)"
+                if count(cell)
+                else f"{_name(cell)} {cell[2]} not run yet"
+                for cell in missing
+            ]
+            comparisons.append(Comparison(label, MISSING, "; ".join(phrases)))
+            continue
+        comparisons.append(
+            compare_changes(
+                label,
+                _name(cells[0]),
+                (scores(cells[0]), scores(cells[1])),
+                _name(other_cells[0]),
+                (scores(other_cells[0]), scores(other_cells[1])),
+                (cells[0][2], cells[1][2]),
+            )
+        )
+    return Claim(spec.text, combine(comparisons), tuple(comparisons))
 
 
 def _name(key: CellKey) -> str:
@@ -409,7 +549,9 @@ def render_claims(claims: Sequence[Claim], reason: Callable[[str, str], str | No
 
 
 __all__ = [
+    "CHANGE_CLAIMS",
     "CONTROL_CLAIMS",
+    "DIRECTED_CLAIMS",
     "EXPLORATION_CLAIM",
     "EXPLORATION_FIGURES",
     "FAILS",
@@ -418,11 +560,13 @@ __all__ = [
     "MISSING",
     "SCORE_CLAIMS",
     "SPREAD_STATISTICS",
+    "ChangeClaim",
     "Claim",
     "Comparison",
     "ExplorationSpec",
     "ScoreClaim",
     "combine",
+    "compare_changes",
     "compare_scores",
     "compare_seeds",
     "evaluate_claims",

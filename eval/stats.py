@@ -118,4 +118,38 @@ def bootstrap_ci(
     return float(lower), float(upper)
 
 
-__all__ = ["bootstrap_ci", "iqm", "mean", "standard_error", "std"]
+def bootstrap_difference_ci(
+    before: ArrayLike,
+    after: ArrayLike,
+    reps: int = 2000,
+    confidence: float = 0.95,
+    seed: int = 0,
+) -> tuple[float, float]:
+    """Percentile confidence interval of ``mean(after) - mean(before)``, each side's runs resampled on their own.
+
+    For the change of one agent's score between two settings whose runs are independent (other runs, not the same
+    run measured twice), so the two sides may have different numbers of runs.
+
+    :param before: the first setting's [runs] scores.
+    :param after: the second setting's [runs] scores.
+    :param reps: number of bootstrap resamples.
+    :param confidence: coverage of the interval, in (0, 1).
+    :param seed: seed of the resampling generator, so that a report is reproducible.
+    :return: (lower, upper) bounds of the interval of the difference of means.
+    """
+    first, second = _as_array(before, "before"), _as_array(after, "after")
+    if first.ndim != 1 or second.ndim != 1:
+        raise ValueError(f"before and after must be [runs] vectors, got shapes {first.shape} and {second.shape}")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence}; e.g. 0.95 for a 95% interval")
+    if reps < 1:
+        raise ValueError(f"reps must be a positive number of resamples, got {reps}")
+    rng = np.random.default_rng(seed)
+    first_means = first[rng.integers(0, len(first), size=(reps, len(first)))].mean(axis=1)  # [reps]
+    second_means = second[rng.integers(0, len(second), size=(reps, len(second)))].mean(axis=1)  # [reps]
+    alpha = (1.0 - confidence) / 2.0
+    lower, upper = np.percentile(second_means - first_means, [100.0 * alpha, 100.0 * (1.0 - alpha)])
+    return float(lower), float(upper)
+
+
+__all__ = ["bootstrap_ci", "bootstrap_difference_ci", "iqm", "mean", "standard_error", "std"]

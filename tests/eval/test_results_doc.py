@@ -211,19 +211,81 @@ def test_claims_follow_the_numbers_they_are_given():
     def figures(part):
         return {"coverage": {"ebm": [0.9, 0.8], "random": [0.3, 0.2]}, "timesteps": [1, 2]}  # the fallback's guess
 
+    def verdicts(claims):  # the issue's claims, the exploration claim and the learning control (the last)
+        return [c.verdict for c in (*claims[:3], claims[-1])]
+
     claims = evaluate_claims(lookup(-10.0, -100.0, -50.0), figures)
-    assert [c.verdict for c in claims] == [HOLDS, HOLDS, HOLDS, HOLDS]
-    assert claims[3].text == LEARNING_CONTROL
-    assert claims[3].comparisons[0].evidence.startswith("EBM -10.00") and "vs untrained EBM -1000.00" in (
-        claims[3].comparisons[0].evidence
+    assert verdicts(claims) == [HOLDS, HOLDS, HOLDS, HOLDS]
+    assert claims[-1].text == LEARNING_CONTROL
+    assert claims[-1].comparisons[0].evidence.startswith("EBM -10.00") and "vs untrained EBM -1000.00" in (
+        claims[-1].comparisons[0].evidence
     )
     claims = evaluate_claims(lookup(-100.0, -10.0, -500.0), lambda part: None)
-    assert [c.verdict for c in claims] == [FAILS, HOLDS, MISSING, HOLDS]
+    assert verdicts(claims) == [FAILS, HOLDS, MISSING, HOLDS]
     claims = evaluate_claims(lookup(-10.0, -100.0, None, untrained_score=-9.0), lambda part: {"nothing": 1.0})
     assert claims[1].verdict == MISSING and claims[0].verdict == HOLDS
     assert "reports no EBM / random pair" in claims[2].comparisons[0].evidence
-    assert claims[3].verdict == FAILS  # the untrained agent scores higher: the win is not the learned energy's
-    assert evaluate_claims(lookup(-10.0, -100.0, None, untrained_score=None), figures)[3].verdict == MISSING
+    assert claims[-1].verdict == FAILS  # the untrained agent scores higher: the win is not the learned energy's
+    assert evaluate_claims(lookup(-10.0, -100.0, None, untrained_score=None), figures)[-1].verdict == MISSING
+
+
+def _table2_lookup(cells: dict[tuple[str, str], list[float]]):
+    """Per-seed scores of the Table 2 pretrained cells, by (setting, agent); every other cell has not run."""
+
+    def scores(key):
+        return cells.get((key[2], key[1]), [])
+
+    return scores
+
+
+def _sawyer_pretrained(ebm_directed, ebm_sequential, ff_directed, ff_sequential, ebm_random=(-350.0, -340.0, -355.0)):
+    return _table2_lookup(
+        {
+            ("pretrained random", "ebm"): list(ebm_random),
+            ("pretrained directed", "ebm"): list(ebm_directed),
+            ("pretrained directed + sequential", "ebm"): list(ebm_sequential),
+            ("pretrained directed", "action-ff"): list(ff_directed),
+            ("pretrained directed + sequential", "action-ff"): list(ff_sequential),
+        }
+    )
+
+
+@pytest.mark.parametrize(
+    ("ff_sequential", "verdict"),
+    [
+        ([-900.0, -880.0, -910.0], HOLDS),  # Action FF drops by ~290, the EBM by ~10: the paper's finding
+        ([-700.0, -500.0, -900.0], INCONCLUSIVE),  # it drops more on average, but its seeds spread too wide
+        ([-500.0, -510.0, -490.0], FAILS),  # it gains more than the EBM does
+    ],
+)
+def test_the_sequential_ablation_compares_the_two_agents_drops(ff_sequential, verdict):
+    from eval.claims import CHANGE_CLAIMS, DIRECTED_CLAIMS
+
+    scores = _sawyer_pretrained([-270.0, -262.0, -280.0], [-258.0, -257.0, -259.0], [-617.0, -600.0, -620.0], ff_sequential)
+    claims = {c.text: c for c in evaluate_claims(scores, lambda part: None)}
+    change = claims[CHANGE_CLAIMS[0].text]
+    assert change.verdict == verdict and change.comparisons[0].label == "sawyer"
+    evidence = change.comparisons[0].evidence
+    assert evidence.startswith("change from pretrained directed to pretrained directed + sequential: EBM +12.67 [95% CI")
+    assert "(-270.67 to -258.00; 3 and 3 seeds)" in evidence
+    directed_vs_random, directed_ebm_vs_ff = (claims[spec.text] for spec in DIRECTED_CLAIMS)
+    assert directed_vs_random.verdict == HOLDS and directed_ebm_vs_ff.verdict == HOLDS
+    assert directed_vs_random.comparisons[0].evidence.startswith("EBM (pretrained directed) -270.67")
+    assert "vs EBM (pretrained random) -348.33" in directed_vs_random.comparisons[0].evidence
+
+
+def test_the_sequential_ablation_waits_for_its_four_cells_and_decides_by_means_below_three_seeds():
+    from eval.claims import CHANGE_CLAIMS
+
+    scores = _sawyer_pretrained([-270.0, -262.0], [-258.0], [-617.0], [])
+    change = {c.text: c for c in evaluate_claims(scores, lambda part: None)}[CHANGE_CLAIMS[0].text]
+    assert change.verdict == MISSING
+    assert change.comparisons[0].evidence == "Action FF pretrained directed + sequential not run yet"
+    change = {c.text: c for c in evaluate_claims(scores, lambda part: None, lambda key: 1)}[CHANGE_CLAIMS[0].text]
+    assert "Action FF pretrained directed + sequential rerun pending (1 run(s)" in change.comparisons[0].evidence
+    scores = _sawyer_pretrained([-270.0, -262.0], [-258.0], [-617.0], [-895.0])
+    change = {c.text: c for c in evaluate_claims(scores, lambda part: None)}[CHANGE_CLAIMS[0].text]
+    assert change.verdict == HOLDS and change.comparisons[0].evidence.endswith("fewer than 3 seeds in a cell, no interval")
 
 
 def _agents(**agents):

@@ -110,3 +110,19 @@ def test_bad_bootstrap_arguments_raise():
         stats.bootstrap_ci([1.0, 2.0], reps=0)
     with pytest.raises(ValueError, match="runs x tasks"):
         stats.bootstrap_ci(np.zeros((2, 2, 2)))
+
+
+def test_bootstrap_difference_ci_brackets_the_change_and_resamples_each_side_alone():
+    before, after = [-270.0, -262.0, -280.0], [-258.0, -257.0, -259.0, -256.0]  # other runs, other counts
+    low, high = stats.bootstrap_difference_ci(before, after, seed=1)
+    assert (low, high) == stats.bootstrap_difference_ci(before, after, seed=1)
+    assert low <= stats.mean(after) - stats.mean(before) <= high and low < high
+    # Constant sides: every resample has the same means, so the interval is the difference itself.
+    assert stats.bootstrap_difference_ci([1.0, 1.0], [4.0, 4.0, 4.0], reps=50) == (3.0, 3.0)
+    # By hand: before [0, 2] resamples to means 0, 1 or 2 (1/4, 1/2, 1/4), after is 10: the change is 8, 9 or 10.
+    low, high = stats.bootstrap_difference_ci([0.0, 2.0], [10.0], reps=4000, confidence=0.5)
+    assert (low, high) == (9.0, 9.0)
+    with pytest.raises(ValueError, match="before is empty"):
+        stats.bootstrap_difference_ci([], [1.0])
+    with pytest.raises(ValueError, match="must be \\[runs\\] vectors"):
+        stats.bootstrap_difference_ci(np.zeros((2, 2)), [1.0])
