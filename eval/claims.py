@@ -252,11 +252,16 @@ def compare_scores(
     """
     if len(scores) == 0 or len(other) == 0:
         sides = [(n, r) for n, s, r in ((name, scores, retired[0]), (other_name, other, retired[1])) if len(s) == 0]
-        not_run = [n for n, r in sides if r == 0]
-        phrases = [f"{' and '.join(not_run)} not run yet"] if not_run else []
-        phrases += [f"{n} rerun pending ({r} run(s) made with earlier library defaults)" for n, r in sides if r > 0]
-        return Comparison(label, MISSING, "; ".join(phrases))
+        return Comparison(label, MISSING, _not_measured(sides))
     return compare_seeds(label, name, scores, other_name, other)
+
+
+def _not_measured(sides: Sequence[tuple[str, int]]) -> str:
+    """The evidence of a comparison that lacks runs: (name, runs made with earlier defaults) of each empty side."""
+    not_run = [n for n, r in sides if r == 0]
+    phrases = [f"{' and '.join(not_run)} not run yet"] if not_run else []
+    phrases += [f"{n} rerun pending ({r} run(s) made with earlier library defaults)" for n, r in sides if r > 0]
+    return "; ".join(phrases)
 
 
 def compare_seeds(
@@ -502,15 +507,9 @@ def _change_claim(spec: ChangeClaim, scores: ScoreLookup, retired: Callable[[Cel
     count = retired or (lambda _key: 0)
     comparisons = []
     for label, cells, other_cells in spec.comparisons:
-        missing = [cell for cell in (*cells, *other_cells) if len(scores(cell)) == 0]
+        missing = [(f"{_name(cell)} {cell[2]}", count(cell)) for cell in (*cells, *other_cells) if not len(scores(cell))]
         if missing:
-            phrases = [
-                f"{_name(cell)} {cell[2]} rerun pending ({count(cell)} run(s) made with earlier library defaults)"
-                if count(cell)
-                else f"{_name(cell)} {cell[2]} not run yet"
-                for cell in missing
-            ]
-            comparisons.append(Comparison(label, MISSING, "; ".join(phrases)))
+            comparisons.append(Comparison(label, MISSING, _not_measured(missing)))
             continue
         comparisons.append(
             compare_changes(

@@ -197,7 +197,7 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
     """
     from eval.experiment_runner import recorded_figure_digests
     from eval.figures_common import figure_digest
-    from eval.provenance import defaults_digest, job_fingerprint
+    from eval.provenance import is_current_run, job_fingerprint
 
     out_dir = Path(part.out_dir)
     if part.figure is not None:
@@ -219,9 +219,7 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
             total += seconds
             finished += 1
             # the same job (fingerprint) made under other defaults, as eval.results_doc counts a rerun pending
-            digest = metrics.get("defaults_digest")
-            same_job = metrics.get("fingerprint") == job_fingerprint(job)
-            retired += int(same_job and digest is not None and digest != defaults_digest(job))
+            retired += int(metrics.get("fingerprint") == job_fingerprint(job) and not is_current_run(job, metrics))
     return MeasuredCost(total, finished, len(jobs), retired=retired) if finished else None
 
 

@@ -75,6 +75,14 @@ def iqm(values: ArrayLike) -> float:
     return float(scipy_stats.trim_mean(_as_array(values).ravel(), proportiontocut=0.25))
 
 
+def _check_resampling(reps: int, confidence: float) -> None:
+    """A clear error for a resampling count below 1 or a confidence outside (0, 1)."""
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie in (0, 1), got {confidence}; e.g. 0.95 for a 95% interval")
+    if reps < 1:
+        raise ValueError(f"reps must be a positive number of resamples, got {reps}")
+
+
 def bootstrap_ci(
     scores: ArrayLike,
     statistic: Callable[[np.ndarray], float] = iqm,
@@ -96,10 +104,7 @@ def bootstrap_ci(
         matrix = matrix[:, None]  # [runs, 1] a single task
     if matrix.ndim != 2:
         raise ValueError(f"scores must be [runs] or [runs x tasks], got shape {matrix.shape}")
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must lie in (0, 1), got {confidence}; e.g. 0.95 for a 95% interval")
-    if reps < 1:
-        raise ValueError(f"reps must be a positive number of resamples, got {reps}")
+    _check_resampling(reps, confidence)
     n_runs, n_tasks = matrix.shape
     rng = np.random.default_rng(seed)
     # [reps, runs, tasks] row indices drawn per task: the stratification keeps every run inside its own task.
@@ -140,10 +145,7 @@ def bootstrap_difference_ci(
     first, second = _as_array(before, "before"), _as_array(after, "after")
     if first.ndim != 1 or second.ndim != 1:
         raise ValueError(f"before and after must be [runs] vectors, got shapes {first.shape} and {second.shape}")
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must lie in (0, 1), got {confidence}; e.g. 0.95 for a 95% interval")
-    if reps < 1:
-        raise ValueError(f"reps must be a positive number of resamples, got {reps}")
+    _check_resampling(reps, confidence)
     rng = np.random.default_rng(seed)
     first_means = first[rng.integers(0, len(first), size=(reps, len(first)))].mean(axis=1)  # [reps]
     second_means = second[rng.integers(0, len(second), size=(reps, len(second)))].mean(axis=1)  # [reps]
