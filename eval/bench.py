@@ -13,9 +13,11 @@ Prints markdown tables, all measured in the same run so that the ratios compare 
 4. **learn throughput**: transitions per second and peak memory of ``EBMPlannerAgent.learn`` and SB3 ``PPO.learn``
    on ``ebm/Particle-v0``, each in its own subprocess.
 5. **Roofline**: this host's float32 matmul peak, measured in the same run (``torch.mm`` of [M, 128] x [128, 128],
-   the energy's hidden layer), the network FLOPs of each plan, and from them the shortest time any planner that
-   evaluates the same network on the same rows could take, and the best ``theirs / ours`` ratio it could reach
-   against the pytorch-mppi time of this run. The learn section uses it too: planning alone at that peak.
+   the energy's hidden layer), the time of drawing each plan's I x N x K x T x D Gaussian numbers, the network FLOPs
+   of each plan, and from them each plan's floor (matmuls at the peak + the draws: no planner that evaluates the same
+   network on the same rows and draws the same noise is faster) and the best ``theirs / ours`` ratio a planner at that
+   floor could reach against the pytorch-mppi time of this run. The learn section uses the peak too: the matmul time
+   of the agent's plans at that peak.
 6. **Chunk size** (``--chunks 1024 4096 ...``): ms per float32 plan with each ``MPPIConfig.chunk_transitions`` on
    the grid's problems larger than the smallest chunk, interleaved, next to pytorch-mppi (how
    ``ebm_agent.mppi.CPU_CHUNK_TRANSITIONS`` was chosen).
@@ -223,10 +225,9 @@ def plan_flops(state_dim: int, samples: int, horizon: int, iterations: int, num_
     :return: {"ours": FLOPs, "theirs": FLOPs} of the networks' matmuls in one plan.
     """
     rows = iterations * num_envs * samples * horizon
-    return {
-        "ours": rows * mlp_flops_per_row(EnergyModel(state_dim).net),
-        "theirs": rows * mlp_flops_per_row(_Dynamics(state_dim).net),
-    }
+    with torch.device("meta"):  # shapes only: no weights allocated or initialised, torch's global RNG untouched
+        energy, dynamics = EnergyModel(state_dim), _Dynamics(state_dim)
+    return {"ours": rows * mlp_flops_per_row(energy.net), "theirs": rows * mlp_flops_per_row(dynamics.net)}
 
 
 def matmul_peak_gflops(
