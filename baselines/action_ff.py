@@ -294,13 +294,26 @@ class ActionFFAgent(PlannerAgentBase):
         init_plans: np.ndarray | None,
         generator: torch.Generator,
         training: bool,
+        init_actions: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        # Action plans start from zero each time: the warm start the base class offers is in state space.
+        # Action plans warm-start from the previous actions, shifted (config.warm_iterations), never from the state
+        # plan; without a warm-start budget they start from zero each time, as the original.
         self.policy.set_training_mode(False)
         start = torch.as_tensor(states, device=self.device)  # [n, D]
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
-        predicted, actions, distance = self.planner.plan(self.dynamics_model, start, goal, generator)
+        init = None if init_actions is None else torch.as_tensor(init_actions, device=self.device)  # [n, T, A]
+        config = self.planner_config
+        fresh = training and init is None and config.method == "mppi" and config.train_iterations is not None
+        iterations = min(config.train_iterations or 0, config.iterations) if fresh else None
+        predicted, actions, distance = self.planner.plan(
+            self.dynamics_model, start, goal, generator, iterations=iterations, init_actions=init
+        )
         return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
+
+    def _warm_plans_apart(self) -> bool:
+        config = self.planner_config
+        fresh = config.iterations if config.train_iterations is None else config.train_iterations
+        return config.method == "mppi" and config.warm_iterations not in (None, fresh)
 
     def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         """One MSE gradient step of f(s, a) toward s' (on standardized targets with ``standardize_outputs``).

@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ebm_agent.config import check_field_types
+from ebm_agent.config import check_field_types, neutral_field
 
 ForwardModel = Callable[[Tensor, Tensor], Tensor]
 """f(states [..., D], actions [..., A]) -> next states [..., D]."""
@@ -17,7 +17,8 @@ ForwardModel = Callable[[Tensor, Tensor], Tensor]
 
 @dataclass
 class ActionPlannerConfig:
-    """Settings of the action-sequence planner; K, T and iterations default to the EBM planner's for a fair match.
+    """Settings of the action-sequence planner; K, T and the iteration budgets default to the EBM planner's for a fair
+    match (``ebm_agent.presets.PAPER_ACTION_FF`` gives the original's 80 iterations for every plan).
 
     :param horizon: T, actions per plan.
     :param num_samples: K, candidate action sequences per env and iteration (MPPI).
@@ -28,6 +29,13 @@ class ActionPlannerConfig:
     :param noise_std: std of the Gaussian action perturbations, in action units.
     :param step_size: gradient planner's learning rate (the original's 1.0).
     :param gradient_noise: std of the noise the gradient planner adds before each step (0.01).
+    :param warm_iterations: MPPI iterations of a plan warm-started from the previous action sequence, shifted by the
+        steps executed, or None to plan every time from zero actions with ``iterations`` (the original). The EBM
+        planner's ``MPPIConfig.warm_iterations`` counterpart: set both alike for equal budgets.
+    :param train_iterations: MPPI iterations of a fresh plan while the agent learns (None: ``iterations``);
+        ``MPPIConfig.train_iterations``' counterpart. Evaluation plans keep ``iterations``.
+    :param keep_warm_start: for each env whose iterations ended farther from the goal than its warm start, return
+        the warm start (``MPPIConfig.keep_warm_start``'s counterpart).
     """
 
     horizon: int = 10
@@ -38,6 +46,9 @@ class ActionPlannerConfig:
     noise_std: float = 0.3
     step_size: float = 1.0
     gradient_noise: float = 0.01
+    warm_iterations: int | None = neutral_field(None, 3)
+    train_iterations: int | None = neutral_field(None, 20)
+    keep_warm_start: bool = neutral_field(False, True)
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -46,6 +57,10 @@ class ActionPlannerConfig:
         for name in ("horizon", "num_samples"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"ActionPlannerConfig.{name} must be >= 1, got {getattr(self, name)!r}.")
+        for name in ("warm_iterations", "train_iterations"):
+            value = getattr(self, name)
+            if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+                raise ValueError(f"ActionPlannerConfig.{name} must be None or an int >= 0, got {value!r}.")
         if not self.temperature > 0 or not self.noise_std > 0:
             raise ValueError("ActionPlannerConfig.temperature and noise_std must be > 0.")
 
@@ -104,7 +119,13 @@ class ActionPlanner:
         return torch.stack(states, dim=-2)
 
     def plan(
-        self, model: ForwardModel, start: Tensor, goals: Tensor, generator: torch.Generator, iterations: int | None = None
+        self,
+        model: ForwardModel,
+        start: Tensor,
+        goals: Tensor,
+        generator: torch.Generator,
+        iterations: int | None = None,
+        init_actions: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, Tensor]:
         """Plan for a batch of envs.
 
@@ -112,20 +133,35 @@ class ActionPlanner:
         :param start: [N, D] start states.
         :param goals: [N, G] goals.
         :param generator: noise source.
-        :param iterations: override ``config.iterations``.
+        :param iterations: override ``config.iterations`` (and ``warm_iterations``).
+        :param init_actions: [N, T, A] warm start (e.g. the previous plan's actions, shifted), used by the MPPI
+            method when ``config.warm_iterations`` is set; NaN rows start from zero actions. None: no warm start.
         :return: (predicted states [N, T+1, D], actions [N, T, A], final goal distance [N]).
         """
         cfg = self.config
+        warm = init_actions is not None and cfg.method == "mppi" and cfg.warm_iterations is not None
         num_iterations = cfg.iterations if iterations is None else iterations
+        if warm and iterations is None:
+            assert cfg.warm_iterations is not None
+            num_iterations = min(cfg.warm_iterations, cfg.iterations)
         num_envs, action_dim = start.shape[0], self.action_low.shape[0]
         if cfg.method == "gradient":
             actions = self._gradient(model, start, goals, generator, num_iterations)
         else:
             actions = torch.zeros(num_envs, cfg.horizon, action_dim, device=self.device)  # [N, T, A]
+            if warm:
+                assert init_actions is not None
+                init = init_actions.to(self.device, actions.dtype)
+                actions = torch.clamp(torch.nan_to_num(init, nan=0.0), self.action_low, self.action_high)
             with torch.no_grad():
                 fast = _fast_model(model)
+                initial = actions
                 for _ in range(num_iterations):
                     actions = self._mppi_update(fast, start, goals, actions, generator)
+                if warm and cfg.keep_warm_start:
+                    ends = self.rollout(fast, torch.cat([start, start]), torch.cat([initial, actions]))  # [2N, T+1, D]
+                    before, after = final_goal_distance(ends, torch.cat([goals, goals]), self.goal_indices).chunk(2)
+                    actions = torch.where((after > before)[:, None, None], initial, actions)
         with torch.no_grad():
             states = self.rollout(_fast_model(model), start, actions)  # [N, T+1, D]
             distance = final_goal_distance(states, goals, self.goal_indices)

@@ -258,6 +258,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         init_plans: np.ndarray | None,
         generator: torch.Generator,
         training: bool,
+        init_actions: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         cost = self.plan_cost.with_extra(*self.extra_energies) if self.extra_energies else self.plan_cost
         warmup = self.online.prior_warmup_plans
@@ -270,13 +271,25 @@ class EBMPlannerAgent(PlannerAgentBase):
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
         init = None if init_plans is None else torch.as_tensor(init_plans, device=self.device)  # [n, T+1, D]
         self.policy.set_training_mode(False)
-        result = self.planner.plan(
-            start, goal, cost, init_plan=init, generator=generator, iterations=self.plan_iterations or None
-        )
+        # The configured budget is the planner's own (a full search, or its warm-start budget for a warm start); only
+        # iterations grown by the adaptive rule are passed explicitly.
+        configured = int(getattr(self.planner_config, "iterations", 0) or 0)
+        iterations = self.plan_iterations if self.plan_iterations != configured else None
+        train_iterations = getattr(self.planner_config, "train_iterations", None)
+        if iterations is None and training and init is None and train_iterations is not None:
+            iterations = min(train_iterations, configured)
+        result = self.planner.plan(start, goal, cost, init_plan=init, generator=generator, iterations=iterations)
         plans = result.plans  # [n, T+1, D]
         with torch.no_grad():
             transition_energy = self.energy_model(plans[:, :-1], plans[:, 1:]).mean(dim=1)  # [n]
         return plans.cpu().numpy().astype(np.float32), None, transition_energy.cpu().numpy()
+
+    def _warm_plans_apart(self) -> bool:
+        config = self.planner_config
+        if not isinstance(config, MPPIConfig):
+            return False
+        fresh = config.iterations if config.train_iterations is None else config.train_iterations
+        return config.warm_iterations not in (None, fresh)
 
     # --------------------------------------------------------------- training
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:

@@ -276,6 +276,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         init_plans: np.ndarray | None,
         generator: torch.Generator,
         training: bool,
+        init_actions: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         """Plan for a batch of envs. Implemented by subclasses.
 
@@ -284,6 +285,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         :param init_plans: [n, T+1, D] warm starts, or None to start from the current states.
         :param generator: the noise source.
         :param training: True inside ``learn`` (the goal/prior warm-up applies).
+        :param init_actions: [n, T, A] the previous planned actions shifted alongside ``init_plans`` (NaN rows: no
+            warm start or no planned actions), or None; for models that plan actions.
         :return: (plans [n, T+1, D], planned actions [n, T, A] or None (use inverse dynamics),
             mean model cost per transition [n]).
         """
@@ -532,24 +535,16 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             goals = np.asarray(obs["desired_goal"], dtype=np.float32)
             self._check_goal_bounds(goals, f"{type(self).__name__}.learn")
             if need.any():
+                self._plan_needed(np.where(need)[0], states, goals, loop)
                 idx = np.where(need)[0]
-                init = None
-                if warm[idx].any():
-                    init = shift_plan(torch.from_numpy(plans[idx]), torch.from_numpy(shift[idx])).numpy()
-                    init[~warm[idx]] = states[idx][~warm[idx], None, :]
-                    self._align_periodic(init, states[idx])
-                start = time.perf_counter()
-                new_plans, new_actions, cost = self._plan(states[idx], goals[idx], init, self._generator, training=True)
-                self.logger.record_mean("plan/ms", 1000.0 * (time.perf_counter() - start) / len(idx))
-                goal_gap = np.abs(new_plans[:, -1, spec.goal_indices] - goals[idx])  # [n, G]
+                goal_gap = np.abs(plans[idx, -1][:, spec.goal_indices] - goals[idx])  # [n, G]
                 if spec.goal_period is not None:
                     goal_gap = np.minimum(
                         np.mod(goal_gap, spec.goal_period), spec.goal_period - np.mod(goal_gap, spec.goal_period)
                     )
                 goal_gap = goal_gap.sum(axis=1)
                 self.logger.record_mean("plan/goal_dist", float(goal_gap.mean()))
-                plans[idx], plan_cost[idx], steps[idx], need[idx] = new_plans, cost, 0, False
-                planned_actions[idx] = np.nan if new_actions is None else new_actions
+                steps[idx], need[idx] = 0, False
                 self.num_plans += len(idx)
             actions = self._actions(states, plans, planned_actions, steps)
             new_obs, rewards, dones, infos = env.step(actions)
@@ -591,6 +586,45 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 loop.episodes_at_dump = self._episode_num
                 self.dump_logs()
         self.dump_logs()
+
+    def _plan_needed(self, idx: np.ndarray, states: np.ndarray, goals: np.ndarray, loop: OnlineLoopState) -> None:
+        """Make new plans for the envs ``idx`` during ``learn``, warm-started where the loop says so; in place.
+
+        Warm starts are the previous plans (and planned actions) shifted by the steps executed. When the model's
+        planner spends a different budget on warm-started plans (:meth:`_warm_plans_apart`), the warm and the fresh
+        envs are planned in two calls, so that each gets its own budget; otherwise in one call, as the original.
+
+        :param idx: [m] the envs that need a plan.
+        :param states: [N, D] all envs' current states.
+        :param goals: [N, G] their goals.
+        :param loop: the loop state whose ``plans``, ``planned_actions`` and ``plan_cost`` receive the new plans.
+        """
+        warm = loop.warm[idx]
+        groups = [idx[warm], idx[~warm]] if (self._warm_plans_apart() and warm.any() and not warm.all()) else [idx]
+        for group in groups:
+            init = init_actions = None
+            if loop.warm[group].any():
+                cold = ~loop.warm[group]
+                shift = torch.from_numpy(loop.shift[group])
+                init = shift_plan(torch.from_numpy(loop.plans[group]), shift).numpy()  # [m, T+1, D]
+                init[cold] = states[group][cold, None, :]
+                self._align_periodic(init, states[group])
+                init_actions = shift_plan(torch.from_numpy(loop.planned_actions[group]), shift).numpy()  # [m, T, A]
+                init_actions[cold] = np.nan
+            start = time.perf_counter()
+            new_plans, new_actions, cost = self._plan(
+                states[group], goals[group], init, self._generator, training=True, init_actions=init_actions
+            )
+            self.logger.record_mean("plan/ms", 1000.0 * (time.perf_counter() - start) / len(group))
+            loop.plans[group], loop.plan_cost[group] = new_plans, cost
+            loop.planned_actions[group] = np.nan if new_actions is None else new_actions
+
+    def _warm_plans_apart(self) -> bool:
+        """Whether warm-started and fresh plans get different planning budgets (then they are planned apart).
+
+        :return: False here; subclasses whose planner has a warm-start budget say True.
+        """
+        return False
 
     def dump_logs(self) -> None:
         """Write SB3's ``rollout/*`` and ``time/*`` keys plus the agent's own, then dump the logger."""

@@ -411,48 +411,86 @@ def bench_compile(device: torch.device, repeats: int) -> dict[str, float]:
     return {"first_ms": first, **{name: statistics.median(values) for name, values in times.items()}}
 
 
-def learn_worker(agent: str, steps: int, threads: int, device: str = "cpu") -> dict[str, float]:
+LEARN_ENVS = ("ebm/Particle-v0", "ebm/Reacher-v0", "ebm/SawyerReach-v0")
+"""The envs of the learn section's ratio table (the issue's targets: EBM and Action FF learn against PPO's)."""
+
+LEARN_AGENTS = ("ebm", "action-ff", "ppo")
+"""The agents of the learn section, by their ``eval.registry`` names."""
+
+
+def learn_worker(
+    agent: str, steps: int, threads: int, device: str = "cpu", env_id: str = ENV_ID, preset: str = "", n_envs: int = 1
+) -> dict[str, float]:
     """
     Run one ``learn`` in this process and measure it (called in a subprocess by :func:`bench_learn`).
 
-    :param agent: ``"ebm"`` or ``"ppo"``.
+    :param agent: ``"ebm"``, ``"action-ff"`` or ``"ppo"`` (``baselines.ppo.make_ppo``: the tuned settings of the
+        env, its own number of envs).
     :param steps: total_timesteps passed to ``learn``.
     :param threads: torch CPU threads.
-    :param device: the torch device both agents train on (``"cpu"`` or ``"cuda"``).
-    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb", "gpu_peak_mb", "plans", "plan_gflop"};
-        ``gpu_peak_mb`` is ``torch.cuda.max_memory_allocated`` on CUDA and 0 on the CPU; ``plans`` is the EBM agent's
-        number of plans and ``plan_gflop`` the network GFLOP of one of them at its final iteration count (0 for PPO).
+    :param device: the torch device the agent trains on (``"cpu"`` or ``"cuda"``).
+    :param env_id: the env.
+    :param preset: the planning agents' preset (``ebm_agent.presets``; ``""``: the library's defaults).
+    :param n_envs: envs of the planning agents' VecEnv (all planned in one batched call per step).
+    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb", "gpu_peak_mb", "plans", "plan_gflop",
+        "iterations"}; ``gpu_peak_mb`` is ``torch.cuda.max_memory_allocated`` on CUDA and 0 on the CPU; ``plans`` is
+        the planning agent's number of plans, ``iterations`` the MPPI iterations they ran in all and ``plan_gflop``
+        the EBM's network GFLOP of all of them (0 for PPO and Action FF).
     """
-    import gymnasium as gym
+    from stable_baselines3.common.env_util import make_vec_env
 
-    import envs  # noqa: F401  (registers ebm/Particle-v0)
+    import envs  # noqa: F401  (registers the ebm/ ids)
+    from ebm_agent.presets import preset_settings
 
     torch.set_num_threads(threads)
-    env = gym.make(ENV_ID)
     model: Any
-    if agent == "ebm":
+    if agent == "ppo":
+        from baselines.ppo import make_ppo
+
+        model = make_ppo(env_id, seed=0, device=device)
+    elif agent in ("ebm", "action-ff"):
+        from baselines.action_ff import ActionFFAgent
         from ebm_agent import EBMPlannerAgent
 
-        model = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device=device)
-    elif agent == "ppo":
-        from stable_baselines3 import PPO
-
-        model = PPO("MultiInputPolicy", env, seed=0, device=device)
+        agent_class = EBMPlannerAgent if agent == "ebm" else ActionFFAgent
+        env = make_vec_env(env_id, n_envs=n_envs, seed=0)
+        model = agent_class("MultiInputPolicy", env, seed=0, device=device, **preset_settings(preset, agent_class))
     else:
-        raise ValueError(f"agent must be 'ebm' or 'ppo', got {agent!r}.")
+        raise ValueError(f"agent must be one of {LEARN_AGENTS}, got {agent!r}.")
+    iterations: list[int] = []
+    if agent != "ppo":
+        plan = model.planner.plan
+
+        def counted_plan(*args: Any, **kwargs: Any) -> Any:
+            result = plan(*args, **kwargs)
+            planned = getattr(result, "iterations", kwargs.get("iterations"))  # Action FF returns a tuple
+            if planned is None:  # Action FF: its warm or its full budget
+                config = model.planner.config
+                warm = kwargs.get("init_actions") is not None and config.warm_iterations is not None
+                planned = min(config.warm_iterations, config.iterations) if warm else config.iterations
+            iterations.append(int(planned))
+            return result
+
+        model.planner.plan = counted_plan
     rss_before = _peak_rss_mb()
     begin = time.perf_counter()
-    model.learn(steps)
+    if agent == "ppo":
+        from baselines.ppo import exact_budget_callback
+
+        model.learn(steps, callback=exact_budget_callback(steps))  # whole rollouts would overshoot the budget
+    else:
+        model.learn(steps)
     seconds = time.perf_counter() - begin
     rss_peak = _peak_rss_mb()
     gpu_peak = torch.cuda.max_memory_allocated() / 2**20 if torch.device(device).type == "cuda" else 0.0
-    plans, plan_gflop = 0.0, 0.0
+    plan_gflop = 0.0
     if agent == "ebm":
         config = model.planner_config
-        rows = config.num_samples * config.horizon * model.plan_iterations  # K x T x I transitions per plan
-        plans, plan_gflop = float(model.num_plans), rows * mlp_flops_per_row(model.energy_model.net) / 1e9
+        rows = config.num_samples * config.horizon * n_envs * sum(iterations)  # K x T x N x I transitions (upper bound)
+        plan_gflop = rows * mlp_flops_per_row(model.energy_model.net) / 1e9
     return {
-        "plans": plans,
+        "plans": float(getattr(model, "num_plans", 0)),
+        "iterations": float(sum(iterations)),
         "plan_gflop": plan_gflop,
         "seconds": seconds,
         "timesteps": float(model.num_timesteps),
@@ -472,23 +510,38 @@ def _peak_rss_mb() -> float:
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KiB on Linux
 
 
-def bench_learn(steps: int, threads: int, device: str = "cpu") -> dict[str, dict[str, float]]:
+def bench_learn(
+    steps: int,
+    threads: int,
+    device: str = "cpu",
+    env_ids: Sequence[str] = LEARN_ENVS,
+    agents: Sequence[str] = LEARN_AGENTS,
+    preset: str = "",
+    n_envs: Sequence[int] = (1,),
+) -> dict[tuple[str, str, int], dict[str, float]]:
     """
-    ``learn(steps)`` of the EBM agent and of PPO, each in a fresh subprocess so that peak memory is its own.
+    ``learn(steps)`` of each agent on each env, each in a fresh subprocess so that peak memory is its own.
 
     :param steps: total_timesteps of each.
     :param threads: torch CPU threads of each.
-    :param device: the torch device both train on.
-    :return: per agent, what :func:`learn_worker` measured.
+    :param device: the torch device they train on.
+    :param env_ids: the envs.
+    :param agents: agent names of :data:`LEARN_AGENTS`.
+    :param preset: the planning agents' preset.
+    :param n_envs: VecEnv sizes of the planning agents (PPO always runs its tuned number of envs once).
+    :return: (env, agent, n_envs) -> what :func:`learn_worker` measured.
     """
     results = {}
-    for agent in ("ebm", "ppo"):
-        command = [sys.executable, "-m", "eval.bench", "--learn-worker", agent, "--learn-steps", str(steps)]
-        command += ["--threads", str(threads), "--learn-device", device]
-        done = subprocess.run(command, capture_output=True, text=True, check=False)
-        if done.returncode != 0:
-            raise RuntimeError(f"the {agent} learn worker failed:\n{done.stderr[-3000:]}")
-        results[agent] = json.loads(done.stdout.strip().splitlines()[-1])
+    for env_id in env_ids:
+        for agent in agents:
+            for count in (1,) if agent == "ppo" else n_envs:
+                command = [sys.executable, "-m", "eval.bench", "--learn-worker", agent, "--learn-steps", str(steps)]
+                command += ["--threads", str(threads), "--learn-device", device, "--learn-envs", env_id]
+                command += ["--learn-preset", preset, "--learn-n-envs", str(count)]
+                done = subprocess.run(command, capture_output=True, text=True, check=False)
+                if done.returncode != 0:
+                    raise RuntimeError(f"the {agent} learn worker on {env_id} failed:\n{done.stderr[-3000:]}")
+                results[(env_id, agent, count)] = json.loads(done.stdout.strip().splitlines()[-1])
     return results
 
 
@@ -573,36 +626,54 @@ def _roofline_table(
     return lines
 
 
-def _learn_table(results: dict[str, dict[str, float]], steps: int, gpu: bool = False) -> list[str]:
+def _learn_table(results: dict[tuple[str, str, int], dict[str, float]], steps: int, gpu: bool = False) -> list[str]:
     header = (
-        "| agent | learn(total_timesteps) | transitions run | seconds | transitions / s | 50k extrapolated (min) | "
-        "peak RSS before learn (MB) | peak RSS (MB) |" + (" peak CUDA memory (MB) |" if gpu else "")
+        "| env | agent | envs | learn(total_timesteps) | transitions run | seconds | transitions / s | plans | "
+        "MPPI iterations | peak RSS before learn (MB) | peak RSS (MB) |" + (" peak CUDA memory (MB) |" if gpu else "")
     )
     lines = [header, "|---" * (header.count("|") - 1) + "|"]
-    for agent, label in (("ebm", "EBMPlannerAgent"), ("ppo", "PPO")):
-        result = results[agent]
+    for (env_id, agent, count), result in results.items():
         rate = result["timesteps"] / result["seconds"]
         lines.append(
-            f"| {label} | {steps} | {int(result['timesteps'])} | {result['seconds']:.1f} | {rate:.1f} | "
-            f"{50_000 / rate / 60:.1f} | {result['rss_before_mb']:.0f} | {result['rss_peak_mb']:.0f} |"
-            + (f" {result.get('gpu_peak_mb', 0.0):.0f} |" if gpu else "")
+            f"| {env_id} | {agent} | {count} | {steps} | {int(result['timesteps'])} | {result['seconds']:.1f} | "
+            f"{rate:.1f} | {result['plans']:.0f} | {result.get('iterations', 0.0):.0f} | {result['rss_before_mb']:.0f} | "
+            f"{result['rss_peak_mb']:.0f} |" + (f" {result.get('gpu_peak_mb', 0.0):.0f} |" if gpu else "")
         )
-    ebm_rate = results["ebm"]["timesteps"] / results["ebm"]["seconds"]
-    ppo_rate = results["ppo"]["timesteps"] / results["ppo"]["seconds"]
-    lines += ["", f"PPO / EBM throughput ratio in this run: {ppo_rate / ebm_rate:.1f}x."]
     return lines
+
+
+def learn_ratios(results: dict[tuple[str, str, int], dict[str, float]]) -> list[str]:
+    """The summary of the learn section: per env, each planning agent's learn wall time over PPO's (same run).
+
+    :param results: what :func:`bench_learn` measured (with PPO on every env).
+    :return: markdown lines (none when no env has PPO and a planning agent).
+    """
+    lines = [
+        "| env | envs | EBM learn (s) | Action FF learn (s) | PPO learn (s) | EBM / PPO | Action FF / PPO |",
+        "|---" * 7 + "|",
+    ]
+    for env_id in dict.fromkeys(env for env, _, _ in results):
+        ppo = results.get((env_id, "ppo", 1))
+        counts = sorted({count for env, agent, count in results if env == env_id and agent != "ppo"})
+        for count in counts:
+            ebm, ff = results.get((env_id, "ebm", count)), results.get((env_id, "action-ff", count))
+            cells = [f"{r['seconds']:.1f}" if r else "-" for r in (ebm, ff, ppo)]
+            ratios = [f"{r['seconds'] / ppo['seconds']:.2f}x" if (r and ppo) else "-" for r in (ebm, ff)]
+            lines.append(f"| {env_id} | {count} | " + " | ".join(cells + ratios) + " |")
+    return lines if len(lines) > 2 else []
 
 
 def _learn_floor(result: dict[str, float], peak_gflops: float | None) -> list[str]:
     """The EBM agent's plans in a learn run and the seconds their network matmuls alone take at the matmul peak."""
     if not result.get("plans") or peak_gflops is None:
         return []
-    floor_s = result["plans"] * result["plan_gflop"] / peak_gflops
+    floor_s = result["plan_gflop"] / peak_gflops
     return [
         "",
-        f"The EBM agent made {result['plans']:.0f} plans of {result['plan_gflop']:.2f} network GFLOP each: at this host's "
-        f"matmul peak ({peak_gflops:.0f} GFLOP/s) their matmuls alone take {floor_s:.1f} s, "
-        f"{100 * floor_s / result['seconds']:.0f}% of the {result['seconds']:.1f} s it ran.",
+        f"The EBM agent made {result['plans']:.0f} plans ({result.get('iterations', 0.0):.0f} MPPI iterations, "
+        f"{result['plan_gflop']:.1f} network GFLOP in all): at this host's matmul peak ({peak_gflops:.0f} GFLOP/s) their "
+        f"matmuls alone take {floor_s:.1f} s, {100 * floor_s / result['seconds']:.0f}% of the "
+        f"{result['seconds']:.1f} s it ran.",
     ]
 
 
@@ -639,10 +710,30 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--learn-device", choices=("cpu", "cuda"), default="cpu", help="the device both agents train on in the learn section"
     )
     parser.add_argument("--envs", type=int, default=1, help="N, the envs of each timed plan (one batched plan)")
-    parser.add_argument("--learn-worker", choices=("ebm", "ppo"), help=argparse.SUPPRESS)
+    parser.add_argument("--learn-envs", nargs="+", default=list(LEARN_ENVS), help="envs of the learn section")
+    parser.add_argument(
+        "--learn-agents", nargs="+", choices=LEARN_AGENTS, default=list(LEARN_AGENTS), help="agents of the learn section"
+    )
+    parser.add_argument(
+        "--learn-preset", default="", help="the planning agents' preset in the learn section ('' defaults, 'paper')"
+    )
+    parser.add_argument(
+        "--learn-n-envs", type=int, nargs="+", default=[1], help="VecEnv sizes of the planning agents' learn (e.g. 1 4 8)"
+    )
+    parser.add_argument("--skip-plans", action="store_true", help="only the learn section (no plan, roofline, compile)")
+    parser.add_argument("--learn-worker", choices=LEARN_AGENTS, help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.learn_worker:
-        print(json.dumps(learn_worker(args.learn_worker, args.learn_steps, args.threads, args.learn_device)))
+        measured = learn_worker(
+            args.learn_worker,
+            args.learn_steps,
+            args.threads,
+            args.learn_device,
+            env_id=args.learn_envs[0],
+            preset=args.learn_preset,
+            n_envs=args.learn_n_envs[0],
+        )
+        print(json.dumps(measured))
         return
     if args.repeats < 1:
         parser.error("--repeats must be >= 1")
@@ -680,97 +771,113 @@ def main(argv: Sequence[str] | None = None) -> None:
         "## Plan time (ms per plan)",
         "",
     ]
-    print("\n".join(report), flush=True)
-    rows = []
-    for device in devices:
-        for case in cases:
-            row = bench_plan(*case, device=device, repeats=args.repeats, compare=compare, num_envs=args.envs)
-            rows.append(row)
-            print(_plan_table([row], True)[-1], flush=True)
-    report += _plan_table(rows, compare)
-    peak_by_size = {str(device): matmul_peak_gflops(device) for device in devices}
-    peaks = {name: max(by_size.values()) for name, by_size in peak_by_size.items()}
-    native = "has" if native_bf16(torch.device("cpu")) else "does not have"
-    report += [
-        "",
-        "What is timed: see the docstring of `eval/bench.py`. `theirs / ours` > 1 means our planner is faster; only ratios",
-        "from the same run are comparable (timings on the shared machines vary by 30-40% between runs).",
-        "The agent plans in float32 by default (`MPPIConfig.autocast=None`); bf16 is opt-in (`autocast='bf16'`), and",
-        f"this machine's CPU {native} native bf16 dot products (AVX512-BF16 or AMX).",
-    ]
-    report += ["", "## Roofline (float32 matmul peak of this host, measured in this run)", ""]
-    for name, by_size in peak_by_size.items():
-        sizes = ", ".join(f"{size:,} rows {gflops:.0f}" for size, gflops in by_size.items())
-        report.append(f"- {name}: `torch.mm` [M, 128] x [128, 128], GFLOP/s by M: {sizes}; peak {peaks[name]:.0f} GFLOP/s")
-    draws = [
-        gaussian_draw_ms(row.iterations * args.envs * row.num_samples * row.horizon * row.state_dim, torch.device(row.device))
-        for row in rows
-    ]
-    report += ["", *_roofline_table(rows, peaks, args.envs, draws), ""]
-    report += [
-        "The floor of a plan is its network's matmul FLOPs at that peak plus the time of drawing its I x N x K x T x D",
-        "standard normal numbers with torch's generator (both planners draw that many: ours as STOMP's white noise,",
-        "pytorch-mppi as its action noise). No planner that evaluates this network on the same K x T rows per iteration",
-        "and draws the same noise can be faster: the thin first and last layers, the STOMP matmul, the costs and the",
-        "softmax only add time. `best possible theirs / ours` is the pytorch-mppi time of this run over our floor: the",
-        "ratio a planner doing nothing but those two things at the host's speed would reach. Where it is below 2, the",
-        "issue's target (2x pytorch-mppi at equal K, T and iterations) cannot be met in float32 on this host by any",
-        "implementation of the same computation; only less or cheaper arithmetic (fewer rows, bf16) could.",
-    ]
-    if args.chunks:
-        positive = [c for c in args.chunks if c > 0]
-        large = [case for case in cases if not positive or case[1] * case[2] > min(positive)]
+    peaks: dict[str, float] = {}
+    if args.skip_plans:
+        report = report[: report.index("## Plan time (ms per plan)")]
+    else:
+        print("\n".join(report), flush=True)
+        rows = []
+        for device in devices:
+            for case in cases:
+                row = bench_plan(*case, device=device, repeats=args.repeats, compare=compare, num_envs=args.envs)
+                rows.append(row)
+                print(_plan_table([row], True)[-1], flush=True)
+        report += _plan_table(rows, compare)
+        peak_by_size = {str(device): matmul_peak_gflops(device) for device in devices}
+        peaks = {name: max(by_size.values()) for name, by_size in peak_by_size.items()}
+        native = "has" if native_bf16(torch.device("cpu")) else "does not have"
         report += [
             "",
-            "## Chunk size (ms per plan, float32, CPU; in brackets pytorch-mppi / ours)",
-            "",
-            f"`MPPIConfig.chunk_transitions=None` takes `CPU_CHUNK_TRANSITIONS` = {CPU_CHUNK_TRANSITIONS} on CPU.",
-            "",
-            *_chunk_table(large, args.chunks, args.repeats, compare),
+            "What is timed: see the docstring of `eval/bench.py`. `theirs / ours` > 1 means our planner is faster;",
+            "only ratios from the same run are comparable (timings on the shared machines vary by 30-40% between runs).",
+            "The agent plans in float32 by default (`MPPIConfig.autocast=None`); bf16 is opt-in (`autocast='bf16'`), and",
+            f"this machine's CPU {native} native bf16 dot products (AVX512-BF16 or AMX).",
         ]
-    if args.quality > 0:
-        quality = bench_quality(args.quality)
+        report += ["", "## Roofline (float32 matmul peak of this host, measured in this run)", ""]
+        for name, by_size in peak_by_size.items():
+            sizes = ", ".join(f"{size:,} rows {gflops:.0f}" for size, gflops in by_size.items())
+            report.append(f"- {name}: `torch.mm` [M, 128] x [128, 128], GFLOP/s by M: {sizes}; peak {peaks[name]:.0f} GFLOP/s")
+        draws = [
+            gaussian_draw_ms(
+                row.iterations * args.envs * row.num_samples * row.horizon * row.state_dim, torch.device(row.device)
+            )
+            for row in rows
+        ]
+        report += ["", *_roofline_table(rows, peaks, args.envs, draws), ""]
         report += [
-            "",
-            f"## Plan quality in bf16 ({args.quality} particle plans, float32 cost of each plan)",
-            "",
-            "| change from the float32 plan | mean | std |",
-            "|---|---|---|",
-            f"| bf16, same noise | {quality['bf16_mean']:+.4f} | {quality['bf16_std']:.4f} |",
-            f"| float32, another seed | {quality['seed_mean']:+.4f} | {quality['seed_std']:.4f} |",
-            "",
-            f"bf16 was worse on {100 * quality['bf16_worse']:.0f}% of the problems. A bf16 change smaller than a new",
-            "seed's means bf16 rounding costs less plan quality than the sampling noise of MPPI itself on these random",
-            "problems; it is still not the default because a trained particle agent (the README example, 2,000",
-            "transitions) scored -27 with bf16 plans against -4.6 in float32: its last centimetre to the goal is below",
-            "bf16's resolution of the energies.",
+            "The floor of a plan is its network's matmul FLOPs at that peak plus the time of drawing its I x N x K x T x D",
+            "standard normal numbers with torch's generator (both planners draw that many: ours as STOMP's white noise,",
+            "pytorch-mppi as its action noise). No planner that evaluates this network on the same K x T rows per iteration",
+            "and draws the same noise can be faster: the thin first and last layers, the STOMP matmul, the costs and the",
+            "softmax only add time. `best possible theirs / ours` is the pytorch-mppi time of this run over our floor: the",
+            "ratio a planner doing nothing but those two things at the host's speed would reach. Where it is below 2, the",
+            "issue's target (2x pytorch-mppi at equal K, T and iterations) cannot be met in float32 on this host by any",
+            "implementation of the same computation; only less or cheaper arithmetic (fewer rows, bf16) could.",
         ]
-    if not args.no_compile:
-        timings = bench_compile(devices[0], args.repeats)
-        report += [
-            "",
-            f"## torch.compile (D, K, T, I = {COMPILE_CASE}, {devices[0]})",
-            "",
-            "| first plan incl. compilation (s) | compiled median ms | eager median ms | eager / compiled |",
-            "|---|---|---|---|",
-            f"| {timings['first_ms'] / 1000:.1f} | {timings['compiled_ms']:.1f} | {timings['eager_ms']:.1f} | "
-            f"{timings['eager_ms'] / timings['compiled_ms']:.2f}x |",
-        ]
+        if args.chunks:
+            positive = [c for c in args.chunks if c > 0]
+            large = [case for case in cases if not positive or case[1] * case[2] > min(positive)]
+            report += [
+                "",
+                "## Chunk size (ms per plan, float32, CPU; in brackets pytorch-mppi / ours)",
+                "",
+                f"`MPPIConfig.chunk_transitions=None` takes `CPU_CHUNK_TRANSITIONS` = {CPU_CHUNK_TRANSITIONS} on CPU.",
+                "",
+                *_chunk_table(large, args.chunks, args.repeats, compare),
+            ]
+        if args.quality > 0:
+            quality = bench_quality(args.quality)
+            report += [
+                "",
+                f"## Plan quality in bf16 ({args.quality} particle plans, float32 cost of each plan)",
+                "",
+                "| change from the float32 plan | mean | std |",
+                "|---|---|---|",
+                f"| bf16, same noise | {quality['bf16_mean']:+.4f} | {quality['bf16_std']:.4f} |",
+                f"| float32, another seed | {quality['seed_mean']:+.4f} | {quality['seed_std']:.4f} |",
+                "",
+                f"bf16 was worse on {100 * quality['bf16_worse']:.0f}% of the problems. A bf16 change smaller than a new",
+                "seed's means bf16 rounding costs less plan quality than the sampling noise of MPPI itself on these random",
+                "problems; it is still not the default because a trained particle agent (the README example, 2,000",
+                "transitions) scored -27 with bf16 plans against -4.6 in float32: its last centimetre to the goal is below",
+                "bf16's resolution of the energies.",
+            ]
+        if not args.no_compile:
+            timings = bench_compile(devices[0], args.repeats)
+            report += [
+                "",
+                f"## torch.compile (D, K, T, I = {COMPILE_CASE}, {devices[0]})",
+                "",
+                "| first plan incl. compilation (s) | compiled median ms | eager median ms | eager / compiled |",
+                "|---|---|---|---|",
+                f"| {timings['first_ms'] / 1000:.1f} | {timings['compiled_ms']:.1f} | {timings['eager_ms']:.1f} | "
+                f"{timings['eager_ms'] / timings['compiled_ms']:.2f}x |",
+            ]
     if args.learn_steps > 0:
-        results = bench_learn(args.learn_steps, args.threads, args.learn_device)
+        results = bench_learn(
+            args.learn_steps,
+            args.threads,
+            args.learn_device,
+            env_ids=args.learn_envs,
+            agents=args.learn_agents,
+            preset=args.learn_preset,
+            n_envs=args.learn_n_envs,
+        )
         where = "CUDA" if args.learn_device == "cuda" else "CPU"
-        report += ["", f"## learn throughput ({ENV_ID}, {where}, {args.threads} threads, one process each)", ""]
-        report += _learn_table(results, args.learn_steps, gpu=args.learn_device == "cuda")
-        report += _learn_floor(results["ebm"], peaks.get(args.learn_device))
+        preset = args.learn_preset or "library defaults"
+        report += ["", f"## learn wall time ({where}, {args.threads} threads, {preset}, one process each)", ""]
+        report += learn_ratios(results)
+        report += ["", *_learn_table(results, args.learn_steps, gpu=args.learn_device == "cuda")]
+        ebm_particle = results.get((ENV_ID, "ebm", 1))
+        report += _learn_floor(ebm_particle, peaks.get(args.learn_device)) if ebm_particle else []
         report += [
             "",
-            "PPO collects whole rollouts of n_steps=2048, so it runs at least 2048 transitions whatever total_timesteps.",
-            "The 50k column extrapolates linearly from the measured transitions/s (startup excluded); the EBM agent's cost",
-            "per transition changes as its plans improve (longer plans mean fewer replans), so it is an estimate.",
+            "PPO is baselines.ppo.make_ppo (the env's tuned settings and number of envs) and stops at exactly",
+            "total_timesteps. The ratio is learn wall time over PPO's, both measured in this run on the same env and threads.",
             "Peak RSS is the worker process's VmHWM (it includes the interpreter, torch and the env), before and after learn.",
         ]
     text = "\n".join(report) + "\n"
-    print("\n".join(report[report.index("## Plan time (ms per plan)") :]))
+    print("\n".join(report[report.index("## Plan time (ms per plan)") :] if not args.skip_plans else report))
     if args.out:
         os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
         with open(args.out, "w") as handle:

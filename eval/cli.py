@@ -216,6 +216,7 @@ def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0
             eval_freq=settings["eval_freq"],
             eval_episodes=settings["eval_episodes"],
             hyperparams=dict(settings["hyperparams"].get(agent, {})),
+            preset=settings.get("preset") or "",
             env_kwargs=dict(settings["env_kwargs"]),
             eval_env_kwargs=evaluation_kwargs(env_id, settings),
             device=settings["device"],

@@ -29,6 +29,7 @@ from pathlib import Path
 from eval.estimates import estimate_jobs_seconds, estimate_part_seconds, format_duration, measured_part_cost
 from eval.jobs import Job
 from eval.parts import (
+    DEFAULTS_SUFFIX,
     SCALES,
     Cell,
     Context,
@@ -67,6 +68,10 @@ TABLE2_PAPER = {
 }
 """Paper Table 2: agent -> setting -> score."""
 
+DEFAULTS_SETTING = "new defaults"
+"""The row label of the online runs made with the library's defaults (``ebm_agent.presets``: every other EBM and
+Action FF row runs the paper preset, the original code's settings)."""
+
 VARIABLE_GOAL = {"goal": "variable"}
 """The Sawyer's variable-goal configuration (a new target per episode)."""
 
@@ -91,6 +96,11 @@ def _table1(context: Context) -> list[Part]:
                 for agent in ("ebm", "action-ff")
             ]
             parts.append(table_part(context, "table1", f"table1/{env}/{data}", cells))
+        cells = [
+            make_cell(context, DEFAULTS_SETTING, env, agent, "online" + DEFAULTS_SUFFIX, preset="")
+            for agent in ("ebm", "action-ff")
+        ]
+        parts.append(table_part(context, "table1", f"table1/{env}/online{DEFAULTS_SUFFIX}", cells))
         parts.append(untrained_part(context, "table1", f"table1/{env}/untrained", env))
     return parts
 
@@ -126,6 +136,16 @@ def _table2(context: Context) -> list[Part]:
                 dataset = TABLE2_DATASETS[setting]
                 cells.append(make_cell(context, label, "sawyer", agent, setting, paper, mode="pretrained", dataset=dataset))
         parts.append(table_part(context, "table2", f"table2/sawyer/{setting}", cells))
+    for setting, variant, env_kwargs in (
+        ("online_fixed", "online", None),
+        ("online_variable", "online_variable_goal", VARIABLE_GOAL),
+    ):
+        label = setting.replace("_", " ") + ", " + DEFAULTS_SETTING
+        cells = [
+            make_cell(context, label, "sawyer", agent, variant + DEFAULTS_SUFFIX, env_kwargs=env_kwargs, preset="")
+            for agent in ("ebm", "action-ff")
+        ]
+        parts.append(table_part(context, "table2", f"table2/sawyer/{setting}{DEFAULTS_SUFFIX}", cells))
     parts.append(untrained_part(context, "table2", "table2/sawyer/untrained_fixed", "sawyer"))
     parts.append(untrained_part(context, "table2", "table2/sawyer/untrained_variable", "sawyer", VARIABLE_GOAL))
     return parts

@@ -27,6 +27,7 @@ from matplotlib.figure import Figure
 
 import envs  # noqa: F401  registers the ebm/ ids
 from ebm_agent import EBMPlannerAgent, collect_random_transitions
+from ebm_agent.presets import PAPER_EBM, merge_settings
 from eval.records import SEED_FOLDER
 
 PAPER_SCORES: dict[str, dict[str, float]] = {
@@ -206,6 +207,10 @@ def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     return command if scale == "paper" else f"{command} --scale {scale}"
 
 
+FIGURE_PRESET = "paper"
+"""The agent preset every figure trains with (``ebm_agent.presets``): the figures reproduce the paper."""
+
+
 def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id: str = "ebm/Particle-v0") -> str:
     """A short hash of the library defaults of the agents a figure trains (``eval.provenance``'s digests).
 
@@ -217,7 +222,7 @@ def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id:
 
     from eval.provenance import agent_defaults_digest
 
-    parts = "/".join(str(agent_defaults_digest(agent, env_id)) for agent in agents)
+    parts = "/".join(str(agent_defaults_digest(agent, env_id, FIGURE_PRESET)) for agent in agents)
     return hashlib.sha256(parts.encode()).hexdigest()[:16]
 
 
@@ -291,7 +296,8 @@ def seed_result(
 
 
 def build_ebm(env: gym.Env, seed: int, budget: FigureBudget, **kwargs: Any) -> EBMPlannerAgent:
-    """An EBM agent with the budget's planner settings and no TensorBoard images.
+    """An EBM agent of the paper preset (``ebm_agent.presets.PAPER_EBM``: figures reproduce the paper) with the
+    budget's planner settings and no TensorBoard images.
 
     :param env: its env.
     :param seed: its seed.
@@ -299,8 +305,9 @@ def build_ebm(env: gym.Env, seed: int, budget: FigureBudget, **kwargs: Any) -> E
     :param kwargs: further ``EBMPlannerAgent`` arguments (e.g. ``cost``).
     :return: the untrained agent.
     """
-    planner = {**budget.planner, **kwargs.pop("planner_config", {})} or None
-    return EBMPlannerAgent("MultiInputPolicy", env, seed=seed, image_log_interval=0, planner_config=planner, **kwargs)
+    settings = merge_settings(PAPER_EBM, {"planner_config": budget.planner})
+    settings = merge_settings(settings, kwargs)
+    return EBMPlannerAgent("MultiInputPolicy", env, seed=seed, image_log_interval=0, **settings)
 
 
 def pretrained_ebm(env_id: str, seed: int, budget: FigureBudget, **kwargs: Any) -> EBMPlannerAgent:

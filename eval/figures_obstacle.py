@@ -33,6 +33,7 @@ from torch import Tensor
 from baselines.action_ff import ActionFFAgent
 from baselines.action_planner import ActionPlanner, ForwardModel
 from ebm_agent import BoxObstacleEnergy
+from ebm_agent.presets import PAPER_ACTION_FF, merge_settings
 from envs.particle import ParticleEnv
 from eval.anchors import compute_anchors
 from eval.figures_common import (
@@ -93,9 +94,8 @@ def obstacle_generalisation(
         """Both agents of one seed trained on the open particle and evaluated around the box by every method."""
         ebm = build_ebm(gym.make("ebm/Particle-v0"), seed, budget)  # random starts, no obstacle
         ebm.learn(budget.online_timesteps)
-        ff = ActionFFAgent(
-            "MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=seed, planner_config=dict(budget.ff_planner) or None
-        )
+        ff_settings = merge_settings(PAPER_ACTION_FF, {"planner_config": dict(budget.ff_planner)})
+        ff = ActionFFAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=seed, **ff_settings)
         ff.learn(budget.online_timesteps)
         blind_planner = ff.planner
         measured: dict[str, Any] = {"scores": {}, "successes": {}, "paths": {}}
@@ -172,7 +172,13 @@ class BoxAwareActionPlanner(ActionPlanner):
         self.box = torch.as_tensor(np.asarray(box, dtype=np.float32), device=inner.device)  # [4]
 
     def plan(
-        self, model: ForwardModel, start: Tensor, goals: Tensor, generator: torch.Generator, iterations: int | None = None
+        self,
+        model: ForwardModel,
+        start: Tensor,
+        goals: Tensor,
+        generator: torch.Generator,
+        iterations: int | None = None,
+        init_actions: Tensor | None = None,
     ) -> tuple[Tensor, Tensor, Tensor]:
         """Plan as the inner planner does, through the model with the box composed in (see the class)."""
         box = self.box
@@ -184,7 +190,7 @@ class BoxAwareActionPlanner(ActionPlanner):
             touches = (low[..., 0] <= box[2]) & (high[..., 0] >= box[0]) & (low[..., 1] <= box[3]) & (high[..., 1] >= box[1])
             return torch.where(touches[..., None], states, predicted)
 
-        return super().plan(blocked_model, start, goals, generator, iterations)
+        return super().plan(blocked_model, start, goals, generator, iterations, init_actions)
 
 
 def obstacle_optimum(

@@ -23,6 +23,7 @@ DEFAULTS: dict[str, Any] = {
     "env_kwargs": {},
     "eval_env_kwargs": {},
     "hyperparams": {},
+    "preset": "",  # the library's defaults
     "device": "auto",
     "jobs": 1,
     "threads": None,  # local only: torch's default in-process (every core), 1 per --jobs worker
@@ -44,7 +45,7 @@ PAPER_DOC = "docs/results.md"
 """Default document of ``--experiment`` at the paper's scale (other scales write ``<out>/results.md``)."""
 
 SWEEP_ONLY = ("env", "baseline", "timesteps", "eval_episodes", "eval_freq", "config", "env_kwargs")
-SWEEP_ONLY_MORE = ("eval_env_kwargs", "hyperparams")
+SWEEP_ONLY_MORE = ("eval_env_kwargs", "hyperparams", "preset")
 EXPERIMENT_ONLY = ("part", "scale", "docs", "records")
 
 
@@ -227,6 +228,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="changes to --env-kwargs for the evaluation env only (e.g. start=[0,0]: train from random starts, "
         "evaluate from the paper's start)",
+    )
+    parser.add_argument(
+        "--preset",
+        choices=("", "paper"),
+        help="agent preset of the EBM agent and Action FF (ebm_agent.presets): paper = the original code's settings "
+        "(80 MPPI iterations for every plan); --hyperparams apply over it (default: the library's defaults)",
     )
     parser.add_argument(
         "-params",

@@ -90,6 +90,8 @@ class Job:
         ``metrics.json`` under ``extra_evaluations``.
     :param variant: a label of the training configuration; it prefixes the run folder (``<out>/<variant>/...``) so
         that runs of several configurations of one env and agent live side by side.
+    :param preset: the agent preset (``ebm_agent.presets``): ``""`` for the library's defaults, ``"paper"`` for the
+        original code's settings; ``hyperparams`` are applied over it. Agents the preset does not name ignore it.
     """
 
     env_id: str
@@ -111,6 +113,7 @@ class Job:
     dataset_kwargs: dict[str, Any] = field(default_factory=dict)
     extra_evaluations: dict[str, dict[str, Any]] = field(default_factory=dict)
     variant: str = ""
+    preset: str = ""
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -119,6 +122,12 @@ class Job:
             raise ValueError(f"Job.timesteps must be 0 for an untrained job (it learns nothing), got {self.timesteps}")
         if self.dataset not in DATASETS:
             raise ValueError(f"Job.dataset must be one of {DATASETS}, got {self.dataset!r}")
+        from ebm_agent.presets import PRESETS
+
+        if self.preset not in ("", *PRESETS):
+            raise ValueError(
+                f"Job.preset must be '' (the library's defaults) or one of {sorted(PRESETS)}, got {self.preset!r}"
+            )
         if Path(self.variant).is_absolute() or ".." in Path(self.variant).parts:
             raise ValueError(f"Job.variant must be a relative folder name inside the output folder, got {self.variant!r}")
 
@@ -337,6 +346,21 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def agent_settings(job: Job) -> dict[str, Any]:
+    """The agent's keyword arguments: the job's preset (``ebm_agent.presets``) with its ``hyperparams`` over it.
+
+    :param job: the job.
+    :return: a new dict.
+    """
+    from ebm_agent.presets import merge_settings, preset_settings
+    from eval.registry import get_agent
+
+    class_name = get_agent(job.agent).class_name
+    if not job.preset or class_name is None:
+        return dict(job.hyperparams)
+    return merge_settings(preset_settings(job.preset, class_name), job.hyperparams)
+
+
 def _train_and_evaluate(job: Job, start: float) -> JobResult:
     from stable_baselines3.common.env_util import make_vec_env
 
@@ -354,7 +378,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         seed=job.seed,
         tensorboard_log=str(job.tensorboard_log),
         device=job.device,
-        hyperparams=dict(job.hyperparams),
+        hyperparams=agent_settings(job),
         verbose=job.verbose,
     )
     eval_kwargs = evaluation_env_kwargs(job)

@@ -20,6 +20,10 @@ from eval.jobs import Job
 AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
 """How agents are named in tables."""
 
+DEFAULTS_SUFFIX = "_defaults"
+"""Appended to a variant (run folder) and a part's name for the rows made with the library's defaults instead of the
+paper preset."""
+
 
 @dataclass(frozen=True)
 class Scale:
@@ -237,6 +241,7 @@ def make_cell(
     extra_evaluations: dict[str, dict[str, Any]] | None = None,
     evaluation: str | None = None,
     paper_note: str = "",
+    preset: str = "paper",
 ) -> Cell:
     """A cell with one job per seed, at the context's scale.
 
@@ -254,6 +259,8 @@ def make_cell(
     :param extra_evaluations: extra evaluations of every run.
     :param evaluation: the extra evaluation whose score stands for the cell.
     :param paper_note: text beside the paper's number.
+    :param preset: the agents' preset (``ebm_agent.presets``): ``"paper"`` (the original code's settings, what the
+        reproduction reports the paper's tables with) or ``""`` (the library's defaults, the rows beside them).
     :return: the cell.
     """
     scale = context.scale
@@ -291,6 +298,7 @@ def make_cell(
             dataset_kwargs=collector,
             extra_evaluations=dict(extra_evaluations or {}),
             variant=str(Path(scale.folder) / variant) if scale.folder else variant,
+            preset=preset,
         )
         for seed in context.seeds_for()
     )

@@ -124,10 +124,22 @@ def dataset_path(job: Job) -> Path:
         "kind": kind,
         "size": job.timesteps,
         "seed": job.seed,
-        "collector": job.dataset_kwargs if kind == "directed" else {},
+        "collector": collector_settings(job) if kind == "directed" else {},
     }
     digest = hashlib.sha256(json.dumps(to_plain(key), sort_keys=True).encode()).hexdigest()[:10]
     return Path(job.out_dir) / "datasets" / job.env_short / f"{kind}_n{job.timesteps}_s{job.seed}_{digest}.npz"
+
+
+def collector_settings(job: Job) -> dict[str, Any]:
+    """The keyword arguments of the EBM agent that collects a directed dataset: the job's agent preset
+    (``ebm_agent.presets``) with ``Job.dataset_kwargs`` over it.
+
+    :param job: a pretrained job.
+    :return: a new dict.
+    """
+    from ebm_agent.presets import merge_settings, preset_settings
+
+    return merge_settings(preset_settings(job.preset, "EBMPlannerAgent"), job.dataset_kwargs)
 
 
 def collection_checkpoint_dir(job: Job) -> Path:
@@ -167,7 +179,7 @@ def _load_or_build(job: Job) -> tuple[TransitionDataset, Path, float]:
                 job.env_kwargs,
                 job.timesteps,
                 job.seed,
-                job.dataset_kwargs,
+                collector_settings(job),
                 job.device,
                 checkpoint_dir=collection_checkpoint_dir(job),
                 checkpoint_every=COLLECT_CHECKPOINT_EVERY,

@@ -22,8 +22,9 @@ from typing import Any
 
 from eval.jobs import Job, JobResult, to_plain
 
-NOT_FINGERPRINTED = ("out_dir", "device", "verbose", "progress_bar")
-"""Job fields that do not change what a run measures: a finished run is reused whatever they are."""
+NOT_FINGERPRINTED = ("out_dir", "device", "verbose", "progress_bar", "preset")
+"""Job fields that do not change what a run measures (``preset`` does, but only through the agent's settings, which
+the defaults digest hashes: a run of the paper preset made before presets existed keeps its fingerprint)."""
 
 PROVENANCE_FILE = "provenance.json"
 SESSIONS_FILE = "sessions.jsonl"
@@ -53,37 +54,39 @@ def job_fingerprint(job: Job) -> str:
 
 
 @functools.lru_cache(maxsize=64)
-def _defaults_digest(agent: str, env_id: str) -> str | None:
+def _defaults_digest(agent: str, env_id: str, preset: str = "") -> str | None:
     from eval.registry import AGENTS
 
     spec = AGENTS.get(agent)
     if spec is None or spec.defaults is None:
         return None
-    settings = spec.defaults(env_id)
+    settings = spec.defaults(env_id, preset)
     return hashlib.sha256(json.dumps(settings, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
-def agent_defaults_digest(agent: str, env_id: str) -> str | None:
-    """A short hash of the library defaults of one agent on one env (``AgentSpec.defaults``).
+def agent_defaults_digest(agent: str, env_id: str, preset: str = "") -> str | None:
+    """A short hash of the settings of one agent on one env under an agent preset (``AgentSpec.defaults``).
 
     :param agent: a name of ``eval.registry.AGENTS``.
     :param env_id: the env.
+    :param preset: ``""`` (the library's defaults) or a preset of ``ebm_agent.presets.PRESETS``.
     :return: 16 hex digits, or None when the agent does not declare its defaults.
     """
-    return _defaults_digest(agent, env_id)
+    return _defaults_digest(agent, env_id, preset)
 
 
 def defaults_digest(job: Job) -> str | None:
-    """A short hash of the library defaults the job's agent runs with (``AgentSpec.defaults``): what the
-    fingerprint cannot see, since it hashes the job and not the code's defaults. A pretrained job on a directed
+    """A short hash of the settings the job's agent runs with (``AgentSpec.defaults`` under the job's agent preset):
+    what the fingerprint cannot see, since it hashes the job and not the code's defaults (nor the preset, which
+    changes only these settings). A pretrained job on a directed
     dataset also depends on the EBM agent that collects it.
 
     :param job: the job.
     :return: 16 hex digits, or None when the agent does not declare its defaults.
     """
-    parts = [_defaults_digest(job.agent, job.env_id)]
+    parts = [_defaults_digest(job.agent, job.env_id, job.preset)]
     if job.mode == "pretrained" and job.dataset != "random":
-        parts.append(_defaults_digest("ebm", job.env_id))
+        parts.append(_defaults_digest("ebm", job.env_id, job.preset))
     if all(part is None for part in parts):
         return None
     return hashlib.sha256("/".join(str(part) for part in parts).encode()).hexdigest()[:16]

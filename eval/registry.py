@@ -55,16 +55,20 @@ class AgentSpec:
     :param tb_log_name: the agent's own name, used as its label in tables and plots.
     :param callbacks: extra callbacks for ``learn`` given the budget (e.g. PPO's exact-budget stop), or None.
     :param description: one line for ``ebm-eval --help``.
-    :param defaults: ``defaults(env_id) -> dict``: the agent's default settings for that env (JSON-able), whose
-        digest every finished run stores, so that a change of a library default retires the runs made before it
-        (``eval.provenance.defaults_digest``); None: not tracked.
+    :param defaults: ``defaults(env_id, preset) -> dict``: the agent's settings for that env under an agent preset
+        (``ebm_agent.presets``; ``""``: the library's defaults), JSON-able, whose digest every finished run stores, so
+        that a change of a library default retires the runs made before it (``eval.provenance.defaults_digest``);
+        None: not tracked.
+    :param class_name: the agent's class name, by which ``ebm_agent.presets.PRESETS`` names its settings (None: no
+        preset changes this agent).
     """
 
     factory: Callable[..., BaseAlgorithm]
     tb_log_name: str
     callbacks: Callable[[int], list[BaseCallback]] | None = None
     description: str = ""
-    defaults: Callable[[str], dict[str, Any]] | None = None
+    defaults: Callable[[str, str], dict[str, Any]] | None = None
+    class_name: str | None = None
 
 
 NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "stats_window_size"})
@@ -79,7 +83,7 @@ def _plain_default(value: Any) -> Any:
     return type(value).__name__  # an object's repr may hold its address: its type is what is stable
 
 
-def class_defaults(agent_class: type) -> dict[str, Any]:
+def class_defaults(agent_class: type, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
     """The default settings of an agent class: its constructor's defaults and, for every config dataclass its
     annotations name (``MPPIConfig | dict | None``), that dataclass's default fields.
 
@@ -89,41 +93,57 @@ def class_defaults(agent_class: type) -> dict[str, Any]:
     nothing at that value, so adding them does not retire the runs.
 
     :param agent_class: the class.
+    :param overrides: constructor arguments that replace defaults (an agent preset, ``ebm_agent.presets``); a dict
+        given for a config argument replaces that config's fields. The neutral rule above is applied after them, so
+        a preset that restores the settings of earlier runs has their digest.
     :return: ``{argument: default, "argument:ConfigName": {field: default}}``.
     """
+    overrides = overrides or {}
     module = vars(sys.modules[agent_class.__module__])
     neutral_arguments = getattr(agent_class, "neutral_arguments", {})
     defaults: dict[str, Any] = {}
     for name, parameter in inspect.signature(agent_class).parameters.items():
         if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
             continue
-        if name in neutral_arguments and parameter.default == neutral_arguments[name]:
+        override = overrides.get(name)
+        value = parameter.default if (name not in overrides or isinstance(override, dict)) else override
+        if name in neutral_arguments and value == neutral_arguments[name]:
             continue  # an argument added later, at the value that changes nothing
-        defaults[name] = _plain_default(parameter.default)
+        defaults[name] = _plain_default(value)
         for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
             config = module.get(token)
             if isinstance(config, type) and dataclasses.is_dataclass(config):
+                fields = override if isinstance(override, dict) else None
                 try:
-                    defaults[f"{name}:{config.__name__}"] = _config_defaults(config)
-                except TypeError:  # a config without defaults for every field
-                    continue
+                    defaults[f"{name}:{config.__name__}"] = _config_defaults(config, fields)
+                except TypeError:  # a config without defaults for every field, or one the preset's fields are not for
+                    try:
+                        defaults[f"{name}:{config.__name__}"] = _config_defaults(config)
+                    except TypeError:
+                        continue
     return defaults
 
 
-def _config_defaults(config: type) -> dict[str, Any]:
-    """A config dataclass's default fields, less those at their declared neutral value (``neutral_field``)."""
+def _config_defaults(config: type, fields: dict[str, Any] | None = None) -> dict[str, Any]:
+    """A config dataclass's fields (its defaults, less ``fields`` given), less those at their declared neutral value
+    (``neutral_field``)."""
     from ebm_agent.config import NEUTRAL_KEY
 
-    values = dataclasses.asdict(config())
+    values = dataclasses.asdict(config(**(fields or {})))
     for item in dataclasses.fields(config):
         if NEUTRAL_KEY in item.metadata and values[item.name] == item.metadata[NEUTRAL_KEY]:
             del values[item.name]
     return values
 
 
-def _class_defaults_of(module: str, class_name: str, env_inverse_dynamics: bool = False) -> Callable[[str], dict[str, Any]]:
-    def defaults(env_id: str) -> dict[str, Any]:
-        settings = class_defaults(getattr(importlib.import_module(module), class_name))
+def _class_defaults_of(
+    module: str, class_name: str, env_inverse_dynamics: bool = False
+) -> Callable[[str, str], dict[str, Any]]:
+    def defaults(env_id: str, preset: str = "") -> dict[str, Any]:
+        from ebm_agent.presets import preset_settings
+
+        agent_class = getattr(importlib.import_module(module), class_name)
+        settings = class_defaults(agent_class, preset_settings(preset, class_name))
         if env_inverse_dynamics:
             changed = env_inverse_dynamics_defaults(env_id)
             if changed:  # only then: the digests of runs on other envs stay as they were
@@ -165,7 +185,7 @@ def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
     }
 
 
-def ppo_defaults(env_id: str) -> dict[str, Any]:
+def ppo_defaults(env_id: str, preset: str = "") -> dict[str, Any]:
     """PPO's settings for an env: the tuned table's entry and SB3's PPO defaults.
 
     :param env_id: the env.
@@ -279,6 +299,7 @@ AGENTS: dict[str, AgentSpec] = {
         "EBM",
         description="energy-based planner (the agent under test)",
         defaults=_class_defaults_of("ebm_agent.agent", "EBMPlannerAgent", env_inverse_dynamics=True),
+        class_name="EBMPlannerAgent",
     ),
     "ppo": AgentSpec(
         make_ppo_agent,
@@ -292,6 +313,7 @@ AGENTS: dict[str, AgentSpec] = {
         "ActionFF",
         description="action-conditioned feed-forward model + MPPI",
         defaults=_class_defaults_of("baselines.action_ff", "ActionFFAgent"),
+        class_name="ActionFFAgent",
     ),
     "random": AgentSpec(
         make_random,

@@ -78,7 +78,8 @@ def test_the_roofline_table_divides_by_the_measured_peak() -> None:
 def test_the_learn_floor_counts_the_agents_plans_at_the_peak() -> None:
     from eval.bench import _learn_floor
 
-    result = {"plans": 1000.0, "plan_gflop": 4.0, "seconds": 80.0}
+    result = {"plans": 1000.0, "iterations": 8000.0, "plan_gflop": 4000.0, "seconds": 80.0}
     (line,) = [text for text in _learn_floor(result, peak_gflops=100.0) if text]
-    assert "made 1000 plans of 4.00 network GFLOP" in line and "take 40.0 s, 50% of the 80.0 s" in line
+    assert "made 1000 plans (8000 MPPI iterations, 4000.0 network GFLOP in all)" in line
+    assert "take 40.0 s, 50% of the 80.0 s" in line
     assert _learn_floor({**result, "plans": 0.0}, 100.0) == [] and _learn_floor(result, None) == []

@@ -119,6 +119,7 @@ def test_part_globs_and_unknown_names(tmp_path):
     assert [p.name for p in select_parts(parts, ["table1/particle/*"])] == [
         "table1/particle/pretrained",
         "table1/particle/online",
+        "table1/particle/online_defaults",
         "table1/particle/untrained",
     ]
     sawyer = {p.name for p in select_parts(parts, ["*/sawyer*"])}
@@ -512,7 +513,7 @@ def test_runs_made_with_other_library_defaults_are_retired(tmp_path, monkeypatch
     assert all(completed_result(job) is not None for job in jobs)
 
     original = AGENTS["ebm"].defaults
-    changed = replace(AGENTS["ebm"], defaults=lambda env_id: {**original(env_id), "horizon": 20})
+    changed = replace(AGENTS["ebm"], defaults=lambda env_id, preset="": {**original(env_id, preset), "horizon": 20})
     monkeypatch.setitem(AGENTS, "ebm", changed)
     provenance._defaults_digest.cache_clear()
     try:

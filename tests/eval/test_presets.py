@@ -1,0 +1,88 @@
+"""Agent presets in the harness: the paper's rows keep their recorded runs, the new defaults get rows of their own."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from ebm_agent.presets import PAPER_EBM
+from eval.cli import build_jobs, resolve_settings
+from eval.experiments import build_parts, make_context
+from eval.figures_common import FIGURE_AGENTS, figure_digest
+from eval.flags import build_parser
+from eval.jobs import Job, agent_settings
+from eval.pretraining import collector_settings
+from eval.provenance import agent_defaults_digest, defaults_digest, job_fingerprint
+
+RECORDS = Path(__file__).resolve().parents[2] / "docs" / "records"
+
+
+def test_every_recorded_table_run_is_current_under_the_paper_preset(tmp_path: Path) -> None:
+    """The records were made before presets existed, with what is now the paper preset: they must all stay current
+    (same fingerprint, same defaults digest), while the same jobs under the library's new defaults would not be."""
+    parts = build_parts(["all"], make_context("paper", str(tmp_path)))
+    jobs = {job.run_dir.relative_to(tmp_path): job for part in parts for cell in part.cells for job in cell.jobs}
+    checked = 0
+    for metrics_path in sorted(RECORDS.glob("**/seed_*/metrics.json")):
+        relative = metrics_path.parent.relative_to(RECORDS)
+        if relative not in jobs:
+            continue
+        job, metrics = jobs[relative], json.loads(metrics_path.read_text())
+        assert metrics["fingerprint"] == job_fingerprint(job), relative
+        assert metrics["defaults_digest"] == defaults_digest(job), relative
+        if job.agent in ("ebm", "action-ff"):
+            assert job.preset == "paper", relative
+            assert defaults_digest(replace(job, preset="")) != metrics["defaults_digest"], relative
+        checked += 1
+    assert checked >= 100  # Tables 1 and 2 and the ablations: 150 runs were recorded
+
+
+def test_new_default_rows_run_the_library_defaults_in_their_own_folders(tmp_path: Path) -> None:
+    parts = {part.name: part for part in build_parts(["table1", "table2"], make_context("paper", str(tmp_path)))}
+    for name in ("table1/particle/online", "table1/maze/online", "table1/reacher/online", "table2/sawyer/online_fixed"):
+        paper, fresh = parts[name], parts[name + "_defaults"]
+        assert [cell.agent for cell in fresh.cells] == ["ebm", "action-ff"]
+        for old, new in zip(paper.cells, fresh.cells, strict=True):
+            assert {job.preset for job in old.jobs} == {"paper"} and {job.preset for job in new.jobs} == {""}
+            assert {job.run_dir for job in old.jobs}.isdisjoint(job.run_dir for job in new.jobs)
+            assert [job.timesteps for job in old.jobs] == [job.timesteps for job in new.jobs] == [50_000] * 3
+    variable = parts["table2/sawyer/online_variable_defaults"].cells[0].jobs[0]
+    assert variable.env_kwargs == {"goal": "variable"} and variable.variant == "online_variable_goal_defaults"
+
+
+def test_the_preset_reaches_the_agent_the_collector_and_the_digest() -> None:
+    job = Job("ebm/Particle-v0", "ebm", 0, 100, 50, 1, hyperparams={"planner_config": {"num_samples": 8}}, preset="paper")
+    settings = agent_settings(job)
+    assert settings["planner_config"] == {**PAPER_EBM["planner_config"], "num_samples": 8}
+    assert agent_settings(replace(job, preset="")) == {"planner_config": {"num_samples": 8}}
+    assert agent_settings(replace(job, agent="ppo", hyperparams={})) == {}  # PPO has no preset
+    directed = replace(job, mode="pretrained", dataset="directed", dataset_kwargs={"horizon": 5})
+    assert collector_settings(directed) == {**PAPER_EBM, "horizon": 5}
+    assert job_fingerprint(job) == job_fingerprint(replace(job, preset=""))  # the digest tells them apart
+    assert defaults_digest(job) != defaults_digest(replace(job, preset=""))
+    assert agent_defaults_digest("ppo", "ebm/Particle-v0", "paper") == agent_defaults_digest("ppo", "ebm/Particle-v0")
+    with pytest.raises(ValueError, match=r"Job\.preset"):
+        replace(job, preset="fast")
+
+
+def test_figures_are_digested_under_the_paper_preset() -> None:
+    checked = 0
+    for provenance in sorted(RECORDS.glob("figures/*/provenance.json")):
+        recorded = json.loads(provenance.read_text()).get("defaults_digest")
+        figure = provenance.parent.name
+        if recorded is None or figure not in FIGURE_AGENTS:
+            continue
+        assert recorded == figure_digest(figure), figure
+        checked += 1
+    assert checked >= 1
+
+
+def test_cli_preset_flag(tmp_path: Path) -> None:
+    args = build_parser().parse_args(["--preset", "paper", "--timesteps", "100", "-f", str(tmp_path)])
+    jobs = build_jobs(resolve_settings(args), progress=False)
+    assert {job.preset for job in jobs} == {"paper"}
+    plain = build_jobs(resolve_settings(build_parser().parse_args(["-f", str(tmp_path)])), progress=False)
+    assert {job.preset for job in plain} == {""}
