@@ -198,6 +198,35 @@ CONTROL_CLAIMS = (
 
 
 @dataclass(frozen=True)
+class NoLossClaim:
+    """A claim that one configuration loses no score against another: its mean lies within or above the other's 95%
+    bootstrap interval of the mean, on each listed cell pair.
+
+    :param text: the claim.
+    :param comparisons: (label, the new configuration's cell, the reference cell).
+    """
+
+    text: str
+    comparisons: tuple[tuple[str, CellKey, CellKey], ...]
+
+
+def _no_loss_pairs() -> tuple[tuple[str, CellKey, CellKey], ...]:
+    pairs = []
+    for env in ("particle", "maze", "reacher"):
+        for agent in ("ebm", "action-ff"):
+            label = f"{env}, {AGENT_NAMES[agent]}"
+            pairs.append(
+                (label, (f"table1/{env}/online_defaults", agent, "new defaults"), (f"table1/{env}/online", agent, "online"))
+            )
+    for setting in ("online_fixed", "online_variable"):
+        for agent in ("ebm", "action-ff"):
+            label = f"sawyer {setting.split('_')[1]}, {AGENT_NAMES[agent]}"
+            new = (f"table2/sawyer/{setting}_defaults", agent, f"{setting.replace('_', ' ')}, new defaults")
+            pairs.append((label, new, (f"table2/sawyer/{setting}", agent, setting.replace("_", " "))))
+    return tuple(pairs)
+
+
+@dataclass(frozen=True)
 class ExplorationSpec:
     """Where an exploration figure keeps the EBM's number and the random explorers' numbers at the same budget.
 
@@ -229,6 +258,46 @@ SPREAD_STATISTICS = ("std", "min", "max", "low", "high", "ci", "sem")
 """Last path components that describe a spread, never compared."""
 
 AGENT_NAMES = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
+
+
+NO_LOSS_CLAIMS = (
+    NoLossClaim(
+        "Not a claim of the paper: the library's defaults (warm-started plans, ebm_agent.presets) lose no score "
+        "against the paper preset online (each new-default mean within or above the paper preset's 95% interval)",
+        _no_loss_pairs(),
+    ),
+)
+"""The library's defaults against the paper preset (issue 33), judged before the controls (which come last)."""
+
+
+def compare_no_loss(label: str, name: str, values: Sequence[float], other_name: str, other: Sequence[float]) -> Comparison:
+    """Whether ``values`` lose no score against ``other``: their mean is at least the low end of the 95% bootstrap
+    interval of ``other``'s mean (with fewer than 3 seeds of ``other``: at least its lowest seed).
+
+    :param label: what is compared.
+    :param name: the new configuration's name.
+    :param values: its per-seed scores (empty: not run).
+    :param other_name: the reference's name.
+    :param other: the reference's per-seed scores (empty: not run).
+    :return: ``HOLDS``, ``FAILS`` or ``MISSING``.
+    """
+    if len(values) == 0 or len(other) == 0:
+        missing = [n for n, v in ((name, values), (other_name, other)) if len(v) == 0]
+        return Comparison(label, MISSING, f"{' and '.join(missing)} not run yet")
+    first, second = np.asarray(values, dtype=np.float64), np.asarray(other, dtype=np.float64)
+    if len(second) >= MIN_SEEDS_FOR_CI:
+        low, high = stats.bootstrap_ci(second, stats.mean)
+        reference = f"{other_name} {stats.mean(second):.2f} [95% CI {low:.2f}, {high:.2f}]"
+    else:
+        low = float(second.min())
+        reference = f"{other_name} {stats.mean(second):.2f} (lowest seed {low:.2f}; fewer than {MIN_SEEDS_FOR_CI} seeds)"
+    mean = stats.mean(first)
+    verdict = HOLDS if mean >= low else FAILS
+    where = (
+        "above the interval" if len(second) >= MIN_SEEDS_FOR_CI and mean > high else "within" if verdict == HOLDS else "below"
+    )
+    seeds = f"{len(first)} seed{'s' if len(first) != 1 else ''}"
+    return Comparison(label, verdict, f"{name} {mean:.2f} ({seeds}) vs {reference}: {where}")
 
 
 def compare_scores(
@@ -458,8 +527,17 @@ def evaluate_claims(
     claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
     claims += [_score_claim(spec, scores, retired) for spec in DIRECTED_CLAIMS]
     claims += [_change_claim(spec, scores, retired) for spec in CHANGE_CLAIMS]
+    claims += [_no_loss_claim(spec, scores) for spec in NO_LOSS_CLAIMS]
     claims += [_score_claim(spec, scores, retired) for spec in CONTROL_CLAIMS]
     return claims
+
+
+def _no_loss_claim(spec: NoLossClaim, scores: ScoreLookup) -> Claim:
+    comparisons = [
+        compare_no_loss(label, f"{_name(new)} (new defaults)", scores(new), f"{_name(old)} (paper preset)", scores(old))
+        for label, new, old in spec.comparisons
+    ]
+    return Claim(spec.text, combine(comparisons), tuple(comparisons))
 
 
 def per_seed_values(metrics: Mapping[str, Any], key: str) -> list[float] | None:

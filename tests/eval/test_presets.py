@@ -33,7 +33,9 @@ def test_every_recorded_table_run_is_current_under_the_paper_preset(tmp_path: Pa
         job, metrics = jobs[relative], json.loads(metrics_path.read_text())
         assert metrics["fingerprint"] == job_fingerprint(job), relative
         assert metrics["defaults_digest"] == defaults_digest(job), relative
-        if job.agent in ("ebm", "action-ff"):
+        if job.agent in ("ebm", "action-ff") and job.variant.endswith("_defaults"):  # the new defaults' own rows
+            assert job.preset == "", relative
+        elif job.agent in ("ebm", "action-ff"):
             assert job.preset == "paper", relative
             assert defaults_digest(replace(job, preset="")) != metrics["defaults_digest"], relative
         checked += 1
@@ -86,3 +88,21 @@ def test_cli_preset_flag(tmp_path: Path) -> None:
     assert {job.preset for job in jobs} == {"paper"}
     plain = build_jobs(resolve_settings(build_parser().parse_args(["-f", str(tmp_path)])), progress=False)
     assert {job.preset for job in plain} == {""}
+
+
+def test_no_loss_comparison_reads_the_reference_interval() -> None:
+    from eval.claims import FAILS, HOLDS, MISSING, NO_LOSS_CLAIMS, compare_no_loss
+
+    paper = [-10.0, -10.5, -9.5]
+    assert compare_no_loss("env", "new", [-10.2, -9.9, -10.1], "paper", paper).verdict == HOLDS
+    above = compare_no_loss("env", "new", [-5.0], "paper", paper)
+    assert above.verdict == HOLDS and "above the interval" in above.evidence
+    below = compare_no_loss("env", "new", [-12.0, -12.5, -11.8], "paper", paper)
+    assert below.verdict == FAILS and "below" in below.evidence
+    assert compare_no_loss("env", "new", [], "paper", paper).verdict == MISSING
+    # Fewer than 3 reference seeds: the lowest reference seed is the bar.
+    assert compare_no_loss("env", "new", [-10.4], "paper", [-10.5, -9.5]).verdict == HOLDS
+    assert compare_no_loss("env", "new", [-10.6], "paper", [-10.5, -9.5]).verdict == FAILS
+    (claim,) = NO_LOSS_CLAIMS
+    assert len(claim.comparisons) == 10  # 5 online settings x (EBM, Action FF)
+    assert all(new[0].endswith("_defaults") and new[0] == old[0] + "_defaults" for _, new, old in claim.comparisons)
