@@ -40,8 +40,11 @@ format: $(STAMP)
 bench-envs: $(STAMP)
 	$(PY) -m envs.bench
 
+# The plan grid (quick), then learn(50,000) of the EBM agent, Action FF and PPO on the particle, Reacher and the
+# Sawyer with their wall-time ratios against PPO (about an hour on 2 cores; BENCH_ARGS="--learn-steps 5000" is quicker).
+BENCH_ARGS ?= --quick --learn-steps 50000 --threads 1
 bench: $(STAMP)
-	$(PY) -m eval.bench
+	$(PY) -m eval.bench $(BENCH_ARGS)
 
 # The paper's tables and figures at the paper's budgets (days of CPU time; resumable: rerun to continue, finished
 # runs are skipped), then docs/results.md. `make results RESULTS_JOBS=4` runs 4 at a time. The document is

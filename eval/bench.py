@@ -432,8 +432,10 @@ def learn_worker(
     :param env_id: the env.
     :param preset: the planning agents' preset (``ebm_agent.presets``; ``""``: the library's defaults).
     :param n_envs: envs of the planning agents' VecEnv (all planned in one batched call per step).
-    :return: {"seconds", "timesteps", "rss_before_mb", "rss_peak_mb", "gpu_peak_mb", "plans", "plan_gflop",
-        "iterations"}; ``gpu_peak_mb`` is ``torch.cuda.max_memory_allocated`` on CUDA and 0 on the CPU; ``plans`` is
+    :return: {"seconds", "cpu_seconds", "timesteps", "rss_before_mb", "rss_peak_mb", "gpu_peak_mb", "plans",
+        "plan_gflop", "iterations"}; ``cpu_seconds`` is the process's CPU time during ``learn`` (with one torch thread,
+        its wall time on an idle core, and much less sensitive than wall time to other processes on the machine);
+        ``gpu_peak_mb`` is ``torch.cuda.max_memory_allocated`` on CUDA and 0 on the CPU; ``plans`` is
         the planning agent's number of plans, ``iterations`` the MPPI iterations they ran in all and ``plan_gflop``
         the EBM's network GFLOP of all of them (0 for PPO and Action FF).
     """
@@ -473,14 +475,14 @@ def learn_worker(
 
         model.planner.plan = counted_plan
     rss_before = _peak_rss_mb()
-    begin = time.perf_counter()
+    begin, cpu_begin = time.perf_counter(), time.process_time()
     if agent == "ppo":
         from baselines.ppo import exact_budget_callback
 
         model.learn(steps, callback=exact_budget_callback(steps))  # whole rollouts would overshoot the budget
     else:
         model.learn(steps)
-    seconds = time.perf_counter() - begin
+    seconds, cpu_seconds = time.perf_counter() - begin, time.process_time() - cpu_begin
     rss_peak = _peak_rss_mb()
     gpu_peak = torch.cuda.max_memory_allocated() / 2**20 if torch.device(device).type == "cuda" else 0.0
     plan_gflop = 0.0
@@ -493,6 +495,7 @@ def learn_worker(
         "iterations": float(sum(iterations)),
         "plan_gflop": plan_gflop,
         "seconds": seconds,
+        "cpu_seconds": cpu_seconds,
         "timesteps": float(model.num_timesteps),
         "rss_before_mb": rss_before,
         "rss_peak_mb": rss_peak,
@@ -642,23 +645,34 @@ def _learn_table(results: dict[tuple[str, str, int], dict[str, float]], steps: i
     return lines
 
 
+def _ratio(result: dict[str, float], ppo: dict[str, float]) -> str:
+    """``wall ratio (CPU ratio)`` of one learn over PPO's."""
+    nan = float("nan")
+    cpu = result.get("cpu_seconds", nan) / ppo.get("cpu_seconds", nan)
+    return f"{result['seconds'] / ppo['seconds']:.2f}x ({cpu:.2f}x)"
+
+
 def learn_ratios(results: dict[tuple[str, str, int], dict[str, float]]) -> list[str]:
-    """The summary of the learn section: per env, each planning agent's learn wall time over PPO's (same run).
+    """The summary of the learn section: per env, each planning agent's learn time over PPO's (same run).
+
+    Wall time and the process's CPU time are both given; with one torch thread per process the CPU time is what
+    each learn would take alone on a core, so its ratio holds on a machine that other work shares.
 
     :param results: what :func:`bench_learn` measured (with PPO on every env).
     :return: markdown lines (none when no env has PPO and a planning agent).
     """
-    lines = [
-        "| env | envs | EBM learn (s) | Action FF learn (s) | PPO learn (s) | EBM / PPO | Action FF / PPO |",
-        "|---" * 7 + "|",
-    ]
+    header = (
+        "| env | envs | EBM learn s (CPU s) | Action FF learn s (CPU s) | PPO learn s (CPU s) | EBM / PPO wall (CPU) | "
+        "Action FF / PPO wall (CPU) |"
+    )
+    lines = [header, "|---" * 7 + "|"]
     for env_id in dict.fromkeys(env for env, _, _ in results):
         ppo = results.get((env_id, "ppo", 1))
         counts = sorted({count for env, agent, count in results if env == env_id and agent != "ppo"})
         for count in counts:
             ebm, ff = results.get((env_id, "ebm", count)), results.get((env_id, "action-ff", count))
-            cells = [f"{r['seconds']:.1f}" if r else "-" for r in (ebm, ff, ppo)]
-            ratios = [f"{r['seconds'] / ppo['seconds']:.2f}x" if (r and ppo) else "-" for r in (ebm, ff)]
+            cells = [f"{r['seconds']:.1f} ({r.get('cpu_seconds', float('nan')):.1f})" if r else "-" for r in (ebm, ff, ppo)]
+            ratios = [_ratio(r, ppo) if (r and ppo) else "-" for r in (ebm, ff)]
             lines.append(f"| {env_id} | {count} | " + " | ".join(cells + ratios) + " |")
     return lines if len(lines) > 2 else []
 

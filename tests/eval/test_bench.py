@@ -83,3 +83,24 @@ def test_the_learn_floor_counts_the_agents_plans_at_the_peak() -> None:
     assert "made 1000 plans (8000 MPPI iterations, 4000.0 network GFLOP in all)" in line
     assert "take 40.0 s, 50% of the 80.0 s" in line
     assert _learn_floor({**result, "plans": 0.0}, 100.0) == [] and _learn_floor(result, None) == []
+
+
+def test_learn_ratios_are_taken_against_ppo_on_the_same_env() -> None:
+    from eval.bench import learn_ratios
+
+    def run(seconds: float, cpu: float) -> dict[str, float]:
+        return {"seconds": seconds, "cpu_seconds": cpu, "timesteps": 50_000.0, "plans": 0.0}
+
+    results = {
+        ("ebm/Particle-v0", "ebm", 1): run(60.0, 55.0),
+        ("ebm/Particle-v0", "action-ff", 1): run(45.0, 44.0),
+        ("ebm/Particle-v0", "ppo", 1): run(30.0, 27.5),
+        ("ebm/Particle-v0", "ebm", 4): run(50.0, 49.5),
+        ("ebm/Reacher-v0", "ebm", 1): run(90.0, 80.0),
+    }
+    lines = learn_ratios(results)
+    rows = {tuple(cell.strip() for cell in line.strip("|").split("|")[:2]): line for line in lines[2:]}
+    assert "| 2.00x (2.00x) | 1.50x (1.60x) |" in rows[("ebm/Particle-v0", "1")]
+    assert rows[("ebm/Particle-v0", "4")].endswith("| 1.67x (1.80x) | - |")
+    assert rows[("ebm/Reacher-v0", "1")].endswith("| - | - |")  # no PPO run on that env: no ratio
+    assert learn_ratios({}) == []
