@@ -40,9 +40,9 @@ format: $(STAMP)
 bench-envs: $(STAMP)
 	$(PY) -m envs.bench
 
-# The plan grid (quick), then learn(50,000) of the EBM agent, Action FF and PPO on the particle, Reacher and the
-# Sawyer with their wall-time ratios against PPO (about an hour on 2 cores; BENCH_ARGS="--learn-steps 5000" is quicker).
-BENCH_ARGS ?= --quick --learn-steps 50000 --threads 1
+# The plan grid (quick), then learn(50,000) of the EBM agent and Action FF (fast preset; --learn-preset '' for the
+# defaults) and PPO on the particle, Reacher and the Sawyer with their time ratios against PPO (about an hour on 2 cores; BENCH_ARGS="--learn-steps 5000" is quicker).
+BENCH_ARGS ?= --quick --learn-steps 50000 --threads 1 --learn-preset fast
 bench: $(STAMP)
 	$(PY) -m eval.bench $(BENCH_ARGS)
 

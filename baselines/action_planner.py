@@ -18,7 +18,7 @@ ForwardModel = Callable[[Tensor, Tensor], Tensor]
 @dataclass
 class ActionPlannerConfig:
     """Settings of the action-sequence planner; K, T and the iteration budgets default to the EBM planner's for a fair
-    match (``ebm_agent.presets.PAPER_ACTION_FF`` gives the original's 80 iterations for every plan).
+    match (``ebm_agent.presets.FAST_ACTION_FF`` gives the budgets of ``FAST_EBM``).
 
     :param horizon: T, actions per plan.
     :param num_samples: K, candidate action sequences per env and iteration (MPPI).
@@ -46,9 +46,9 @@ class ActionPlannerConfig:
     noise_std: float = 0.3
     step_size: float = 1.0
     gradient_noise: float = 0.01
-    warm_iterations: int | None = neutral_field(None, 3)
-    train_iterations: int | None = neutral_field(None, 20)
-    keep_warm_start: bool = neutral_field(False, True)
+    warm_iterations: int | None = neutral_field(None)
+    train_iterations: int | None = neutral_field(None)
+    keep_warm_start: bool = neutral_field(False)
 
     def __post_init__(self) -> None:
         check_field_types(self)

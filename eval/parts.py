@@ -20,9 +20,14 @@ from eval.jobs import Job
 AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
 """How agents are named in tables."""
 
-DEFAULTS_SUFFIX = "_defaults"
-"""Appended to a variant (run folder) and a part's name for the rows made with the library's defaults instead of the
+FAST_PART_SUFFIX = "_fast"
+"""Appended to a part's name for the rows made with the fast preset (``ebm_agent.presets.FAST_EBM``) instead of the
 paper preset."""
+
+FAST_VARIANT_SUFFIX = "_defaults"
+"""Appended to a variant (run folder) for the fast preset's rows. The name is historical: the fast budgets were the
+library's defaults while these runs were recorded (2026-12-05), until they measured lower on the Sawyer; a variant is
+part of a run's fingerprint, so the folders keep the name their records carry."""
 
 
 @dataclass(frozen=True)

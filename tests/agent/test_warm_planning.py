@@ -1,4 +1,4 @@
-"""Warm-started planning (the fast defaults) and the paper preset (the original's budget, unchanged plans)."""
+"""Warm-started planning (the fast preset) and the paper preset (the original's budget and the defaults: unchanged plans)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ebm_agent.costs import AccelerationPrior, PlanCost, RewardGoalEnergy
 from ebm_agent.energy import EnergyModel
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import clip_states, shift_plan
-from ebm_agent.presets import PAPER_ACTION_FF, PAPER_EBM, merge_settings, preset_settings
+from ebm_agent.presets import FAST_ACTION_FF, FAST_EBM, PAPER_ACTION_FF, PAPER_EBM, merge_settings, preset_settings
 
 HORIZON = 10
 
@@ -35,7 +35,9 @@ def random_problem(seed: int, num_envs: int = 16) -> tuple[torch.Tensor, torch.T
 
 
 def planner(**fields: object) -> MPPIPlanner:
-    return MPPIPlanner(MPPIConfig(horizon=HORIZON, **fields), state_dim=2, state_low=[-1, -1], state_high=[1, 1])  # type: ignore[arg-type]
+    """A bounded planner with the fast preset's budgets, ``fields`` over them."""
+    config = {**FAST_EBM["planner_config"], **fields}
+    return MPPIPlanner(MPPIConfig(horizon=HORIZON, **config), state_dim=2, state_low=[-1, -1], state_high=[1, 1])  # type: ignore[arg-type]
 
 
 def shifted_cost(plans: torch.Tensor, start: torch.Tensor, goals: torch.Tensor, cost: PlanCost) -> torch.Tensor:
@@ -68,13 +70,14 @@ def test_a_warm_started_plan_is_never_worse_than_the_shifted_plan(seed: int) -> 
 
 def test_budgets_fresh_warm_and_explicit() -> None:
     start, goals, cost, previous = random_problem(0, num_envs=2)
-    default = planner()  # the library's defaults: 80 fresh, 3 warm
+    default = planner()  # the fast preset: 80 for a fresh plan unless the agent passes its train budget, 3 warm
     assert default.plan(start, goals, cost).iterations == 80
     assert default.plan(start, goals, cost, init_plan=previous).iterations == 3
     assert default.plan(start, goals, cost, init_plan=previous, iterations=7).iterations == 7
     assert planner(iterations=2).plan(start, goals, cost, init_plan=previous).iterations == 2  # at most `iterations`
     paper = MPPIConfig(**PAPER_EBM["planner_config"])
     assert MPPIPlanner(paper, state_dim=2).plan(start, goals, cost, init_plan=previous).iterations == 80
+    assert paper == MPPIConfig()  # the paper preset is the library's defaults
     with pytest.raises(ValueError, match="warm_iterations"):
         MPPIConfig(warm_iterations=-1)
     with pytest.raises(ValueError, match="stop_tolerance"):
@@ -127,9 +130,9 @@ def record_plans(agent: EBMPlannerAgent | ActionFFAgent) -> list[tuple[int, bool
     return calls
 
 
-def test_learn_budgets_of_the_defaults_and_of_the_paper_preset() -> None:
+def test_learn_budgets_of_the_fast_and_of_the_paper_preset() -> None:
     env = gym.make("ebm/Particle-v0")
-    fast = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu", image_log_interval=0)
+    fast = EBMPlannerAgent("MultiInputPolicy", env, seed=0, device="cpu", image_log_interval=0, **FAST_EBM)
     calls = record_plans(fast)
     fast.learn(150)
     assert any(warm for _, warm, _ in calls) and any(not warm for _, warm, _ in calls)
@@ -156,7 +159,7 @@ def test_vec_env_learn_plans_warm_and_fresh_envs_apart_only_with_a_warm_budget()
         agent.learn(400)
         return calls
 
-    fast = calls_of({})
+    fast = calls_of(FAST_EBM)
     assert all(warm == (iterations is None) for _, warm, iterations in fast)  # warm groups never carry fresh envs
     paper = calls_of(PAPER_EBM)
     # The paper preset plans every env that needs a plan in one call, as the original: never two calls per step.
@@ -165,12 +168,12 @@ def test_vec_env_learn_plans_warm_and_fresh_envs_apart_only_with_a_warm_budget()
 
 def test_action_ff_warm_starts_from_its_shifted_actions() -> None:
     env = gym.make("ebm/Particle-v0")
-    agent = ActionFFAgent("MultiInputPolicy", env, seed=0, device="cpu")
+    agent = ActionFFAgent("MultiInputPolicy", env, seed=0, device="cpu", **FAST_ACTION_FF)
     calls = record_plans(agent)
     agent.learn(150)
     assert any(warm for _, warm, _ in calls)
     assert all(iterations == 20 for _, warm, iterations in calls if not warm)
-    assert agent.planner_config == ActionPlannerConfig(horizon=10)
+    assert agent.planner_config == ActionPlannerConfig(horizon=10, **FAST_ACTION_FF["planner_config"])
     paper = ActionFFAgent("MultiInputPolicy", env, seed=0, device="cpu", **PAPER_ACTION_FF)
     assert paper.planner_config.warm_iterations is None and paper.planner_config.train_iterations is None
 
@@ -182,6 +185,7 @@ def test_presets_merge_and_reject_unknown_names() -> None:
     assert preset_settings("", EBMPlannerAgent) == {}
     assert preset_settings("paper", "EBMPlannerAgent") == PAPER_EBM
     assert preset_settings("paper", "PPO") == {}
+    assert preset_settings("fast", EBMPlannerAgent) == FAST_EBM
     with pytest.raises(ValueError, match="unknown agent preset"):
-        preset_settings("fast", EBMPlannerAgent)
+        preset_settings("faster", EBMPlannerAgent)
     assert np.isfinite(MPPIConfig(**PAPER_EBM["planner_config"]).temperature)

@@ -119,7 +119,7 @@ def test_part_globs_and_unknown_names(tmp_path):
     assert [p.name for p in select_parts(parts, ["table1/particle/*"])] == [
         "table1/particle/pretrained",
         "table1/particle/online",
-        "table1/particle/online_defaults",
+        "table1/particle/online_fast",
         "table1/particle/untrained",
     ]
     sawyer = {p.name for p in select_parts(parts, ["*/sawyer*"])}

@@ -1,4 +1,4 @@
-"""Agent presets in the harness: the paper's rows keep their recorded runs, the new defaults get rows of their own."""
+"""Agent presets in the harness: the paper's rows keep their recorded runs, the fast preset gets rows of its own."""
 
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ RECORDS = Path(__file__).resolve().parents[2] / "docs" / "records"
 
 def test_every_recorded_table_run_is_current_under_the_paper_preset(tmp_path: Path) -> None:
     """The records were made before presets existed, with what is now the paper preset: they must all stay current
-    (same fingerprint, same defaults digest), while the same jobs under the library's new defaults would not be."""
+    (same fingerprint, same defaults digest), while the same jobs under the fast preset would not be. The fast rows
+    were recorded while the fast budgets were the library's defaults: they must be current under the fast preset."""
     parts = build_parts(["all"], make_context("paper", str(tmp_path)))
     jobs = {job.run_dir.relative_to(tmp_path): job for part in parts for cell in part.cells for job in cell.jobs}
     checked = 0
@@ -33,25 +34,26 @@ def test_every_recorded_table_run_is_current_under_the_paper_preset(tmp_path: Pa
         job, metrics = jobs[relative], json.loads(metrics_path.read_text())
         assert metrics["fingerprint"] == job_fingerprint(job), relative
         assert metrics["defaults_digest"] == defaults_digest(job), relative
-        if job.agent in ("ebm", "action-ff") and job.variant.endswith("_defaults"):  # the new defaults' own rows
-            assert job.preset == "", relative
+        if job.agent in ("ebm", "action-ff") and job.variant.endswith("_defaults"):  # the fast preset's own rows
+            assert job.preset == "fast", relative
+            assert defaults_digest(replace(job, preset="paper")) != metrics["defaults_digest"], relative
         elif job.agent in ("ebm", "action-ff"):
             assert job.preset == "paper", relative
-            assert defaults_digest(replace(job, preset="")) != metrics["defaults_digest"], relative
+            assert defaults_digest(replace(job, preset="fast")) != metrics["defaults_digest"], relative
         checked += 1
     assert checked >= 100  # Tables 1 and 2 and the ablations: 150 runs were recorded
 
 
-def test_new_default_rows_run_the_library_defaults_in_their_own_folders(tmp_path: Path) -> None:
+def test_fast_rows_run_the_fast_preset_in_their_own_folders(tmp_path: Path) -> None:
     parts = {part.name: part for part in build_parts(["table1", "table2"], make_context("paper", str(tmp_path)))}
     for name in ("table1/particle/online", "table1/maze/online", "table1/reacher/online", "table2/sawyer/online_fixed"):
-        paper, fresh = parts[name], parts[name + "_defaults"]
+        paper, fresh = parts[name], parts[name + "_fast"]
         assert [cell.agent for cell in fresh.cells] == ["ebm", "action-ff"]
         for old, new in zip(paper.cells, fresh.cells, strict=True):
-            assert {job.preset for job in old.jobs} == {"paper"} and {job.preset for job in new.jobs} == {""}
+            assert {job.preset for job in old.jobs} == {"paper"} and {job.preset for job in new.jobs} == {"fast"}
             assert {job.run_dir for job in old.jobs}.isdisjoint(job.run_dir for job in new.jobs)
             assert [job.timesteps for job in old.jobs] == [job.timesteps for job in new.jobs] == [50_000] * 3
-    variable = parts["table2/sawyer/online_variable_defaults"].cells[0].jobs[0]
+    variable = parts["table2/sawyer/online_variable_fast"].cells[0].jobs[0]
     assert variable.env_kwargs == {"goal": "variable"} and variable.variant == "online_variable_goal_defaults"
 
 
@@ -60,14 +62,16 @@ def test_the_preset_reaches_the_agent_the_collector_and_the_digest() -> None:
     settings = agent_settings(job)
     assert settings["planner_config"] == {**PAPER_EBM["planner_config"], "num_samples": 8}
     assert agent_settings(replace(job, preset="")) == {"planner_config": {"num_samples": 8}}
+    assert agent_settings(replace(job, preset="fast"))["planner_config"]["warm_iterations"] == 3
     assert agent_settings(replace(job, agent="ppo", hyperparams={})) == {}  # PPO has no preset
     directed = replace(job, mode="pretrained", dataset="directed", dataset_kwargs={"horizon": 5})
     assert collector_settings(directed) == {**PAPER_EBM, "horizon": 5}
-    assert job_fingerprint(job) == job_fingerprint(replace(job, preset=""))  # the digest tells them apart
-    assert defaults_digest(job) != defaults_digest(replace(job, preset=""))
+    assert job_fingerprint(job) == job_fingerprint(replace(job, preset="fast"))  # the digest tells them apart
+    assert defaults_digest(job) != defaults_digest(replace(job, preset="fast"))
+    assert defaults_digest(job) == defaults_digest(replace(job, preset=""))  # the paper preset is the defaults
     assert agent_defaults_digest("ppo", "ebm/Particle-v0", "paper") == agent_defaults_digest("ppo", "ebm/Particle-v0")
     with pytest.raises(ValueError, match=r"Job\.preset"):
-        replace(job, preset="fast")
+        replace(job, preset="faster")
 
 
 def test_figures_are_digested_under_the_paper_preset() -> None:
@@ -83,9 +87,9 @@ def test_figures_are_digested_under_the_paper_preset() -> None:
 
 
 def test_cli_preset_flag(tmp_path: Path) -> None:
-    args = build_parser().parse_args(["--preset", "paper", "--timesteps", "100", "-f", str(tmp_path)])
+    args = build_parser().parse_args(["--preset", "fast", "--timesteps", "100", "-f", str(tmp_path)])
     jobs = build_jobs(resolve_settings(args), progress=False)
-    assert {job.preset for job in jobs} == {"paper"}
+    assert {job.preset for job in jobs} == {"fast"}
     plain = build_jobs(resolve_settings(build_parser().parse_args(["-f", str(tmp_path)])), progress=False)
     assert {job.preset for job in plain} == {""}
 
@@ -105,4 +109,4 @@ def test_no_loss_comparison_reads_the_reference_interval() -> None:
     assert compare_no_loss("env", "new", [-10.6], "paper", [-10.5, -9.5]).verdict == FAILS
     (claim,) = NO_LOSS_CLAIMS
     assert len(claim.comparisons) == 10  # 5 online settings x (EBM, Action FF)
-    assert all(new[0].endswith("_defaults") and new[0] == old[0] + "_defaults" for _, new, old in claim.comparisons)
+    assert all(new[0] == old[0] + "_fast" for _, new, old in claim.comparisons)
