@@ -787,7 +787,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ]
     peaks: dict[str, float] = {}
     if args.skip_plans:
-        report = report[: report.index("## Plan time (ms per plan)")]
+        report = [line for line in report[: report.index("## Plan time (ms per plan)")] if not line.startswith("- Grid:")]
     else:
         print("\n".join(report), flush=True)
         rows = []
