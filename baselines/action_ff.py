@@ -12,7 +12,7 @@ from torch import Tensor, nn
 
 from baselines.action_planner import ActionPlanner, ActionPlannerConfig
 from ebm_agent.base import PlannerAgentBase, Segment
-from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.config import OnlineConfig, learn_budgets, make_config
 from ebm_agent.costs import wrap_difference
 from ebm_agent.energy import EnergyConfig, PeriodicFeatures
 from ebm_agent.fast_mlp import WorkspaceMLP
@@ -302,18 +302,11 @@ class ActionFFAgent(PlannerAgentBase):
         start = torch.as_tensor(states, device=self.device)  # [n, D]
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
         init = None if init_actions is None else torch.as_tensor(init_actions, device=self.device)  # [n, T, A]
-        config = self.planner_config
-        fresh = training and init is None and config.method == "mppi" and config.train_iterations is not None
-        iterations = min(config.train_iterations or 0, config.iterations) if fresh else None
+        iterations = learn_budgets(self.planner_config)[0] if (training and init is None) else None
         predicted, actions, distance = self.planner.plan(
             self.dynamics_model, start, goal, generator, iterations=iterations, init_actions=init
         )
         return predicted.cpu().numpy(), actions.cpu().numpy(), distance.cpu().numpy()
-
-    def _warm_plans_apart(self) -> bool:
-        config = self.planner_config
-        fresh = config.iterations if config.train_iterations is None else config.train_iterations
-        return config.method == "mppi" and config.warm_iterations not in (None, fresh)
 
     def _mse_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         """One MSE gradient step of f(s, a) toward s' (on standardized targets with ``standardize_outputs``).

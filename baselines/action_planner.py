@@ -145,6 +145,7 @@ class ActionPlanner:
             assert cfg.warm_iterations is not None
             num_iterations = min(cfg.warm_iterations, cfg.iterations)
         num_envs, action_dim = start.shape[0], self.action_low.shape[0]
+        states: Tensor | None = None  # [N, T+1, D] once rolled out
         if cfg.method == "gradient":
             actions = self._gradient(model, start, goals, generator, num_iterations)
         else:
@@ -155,15 +156,19 @@ class ActionPlanner:
                 actions = torch.clamp(torch.nan_to_num(init, nan=0.0), self.action_low, self.action_high)
             with torch.no_grad():
                 fast = _fast_model(model)
-                initial = actions
+                initial = actions  # [N, T, A] the warm start
                 for _ in range(num_iterations):
                     actions = self._mppi_update(fast, start, goals, actions, generator)
                 if warm and cfg.keep_warm_start:
-                    ends = self.rollout(fast, torch.cat([start, start]), torch.cat([initial, actions]))  # [2N, T+1, D]
+                    # Both candidates in one rollout [2N, T+1, D], which also gives the returned plan's states.
+                    ends = self.rollout(fast, torch.cat([start, start]), torch.cat([initial, actions]))
                     before, after = final_goal_distance(ends, torch.cat([goals, goals]), self.goal_indices).chunk(2)
-                    actions = torch.where((after > before)[:, None, None], initial, actions)
+                    worse = (after > before)[:, None, None]  # [N, 1, 1]
+                    actions = torch.where(worse, initial, actions)
+                    states = torch.where(worse, ends[:num_envs], ends[num_envs:])
         with torch.no_grad():
-            states = self.rollout(_fast_model(model), start, actions)  # [N, T+1, D]
+            if states is None:
+                states = self.rollout(_fast_model(model), start, actions)  # [N, T+1, D]
             distance = final_goal_distance(states, goals, self.goal_indices)
         return states, actions, distance
 

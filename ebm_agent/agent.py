@@ -13,7 +13,7 @@ from stable_baselines3.common.type_aliases import GymEnv
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBuffer
-from ebm_agent.config import OnlineConfig, check_field_types, make_config
+from ebm_agent.config import OnlineConfig, check_field_types, learn_budgets, make_config
 from ebm_agent.costs import (
     AccelerationPrior,
     ExtraEnergy,
@@ -275,21 +275,13 @@ class EBMPlannerAgent(PlannerAgentBase):
         # iterations grown by the adaptive rule are passed explicitly.
         configured = int(getattr(self.planner_config, "iterations", 0) or 0)
         iterations = self.plan_iterations if self.plan_iterations != configured else None
-        train_iterations = getattr(self.planner_config, "train_iterations", None)
-        if iterations is None and training and init is None and train_iterations is not None:
-            iterations = min(train_iterations, configured)
+        if iterations is None and training and init is None:
+            iterations = learn_budgets(self.planner_config)[0]
         result = self.planner.plan(start, goal, cost, init_plan=init, generator=generator, iterations=iterations)
         plans = result.plans  # [n, T+1, D]
         with torch.no_grad():
             transition_energy = self.energy_model(plans[:, :-1], plans[:, 1:]).mean(dim=1)  # [n]
         return plans.cpu().numpy().astype(np.float32), None, transition_energy.cpu().numpy()
-
-    def _warm_plans_apart(self) -> bool:
-        config = self.planner_config
-        if not isinstance(config, MPPIConfig):
-            return False
-        fresh = config.iterations if config.train_iterations is None else config.train_iterations
-        return config.warm_iterations not in (None, fresh)
 
     # --------------------------------------------------------------- training
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:

@@ -23,7 +23,7 @@ from stable_baselines3.common.utils import configure_logger, safe_mean
 
 from ebm_agent.buffers import TransitionBatch, TransitionBuffer
 from ebm_agent.checkpoint import CheckpointMixin
-from ebm_agent.config import OnlineConfig, make_config
+from ebm_agent.config import OnlineConfig, learn_budgets, make_config
 from ebm_agent.datasets import TransitionDataset, iterate_minibatches
 from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces, env_inverse_dynamics, read_goal_spec
 from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
@@ -622,9 +622,11 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     def _warm_plans_apart(self) -> bool:
         """Whether warm-started and fresh plans get different planning budgets (then they are planned apart).
 
-        :return: False here; subclasses whose planner has a warm-start budget say True.
+        :return: True when the model's ``planner_config`` sets a warm-start budget other than its fresh one.
         """
-        return False
+        config: Any = getattr(self, "planner_config", None)
+        fresh, warm = learn_budgets(config)
+        return warm is not None and warm != (config.iterations if fresh is None else fresh)
 
     def dump_logs(self) -> None:
         """Write SB3's ``rollout/*`` and ``time/*`` keys plus the agent's own, then dump the logger."""

@@ -139,3 +139,20 @@ def check_field_types(config: Any) -> None:
         if not _matches(value, expected):
             name = getattr(expected, "__name__", str(expected))
             raise TypeError(f"{type(config).__name__}.{field.name} must be {name}, got {value!r}.")
+
+
+def learn_budgets(config: Any) -> tuple[int | None, int | None]:
+    """Iterations of a fresh and of a warm-started plan made while learning, read from a planner config.
+
+    Works for any config with ``iterations`` and, optionally, ``train_iterations`` and ``warm_iterations``
+    (``MPPIConfig``, ``ActionPlannerConfig``); each budget is at most ``iterations``. A config without such fields
+    (None, ``LangevinConfig``, a non-MPPI action planner) has no budgets of its own.
+
+    :param config: the planner config, or None.
+    :return: (fresh, warm): None where the planner's full ``iterations`` apply.
+    """
+    if getattr(config, "method", "mppi") != "mppi" or not hasattr(config, "warm_iterations"):
+        return None, None
+    full = int(config.iterations)
+    train, warm = config.train_iterations, config.warm_iterations
+    return (None if train is None else min(train, full)), (None if warm is None else min(warm, full))

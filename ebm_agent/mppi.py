@@ -260,7 +260,8 @@ class MPPIPlanner:
             else:
                 num_iterations = self._iterate_until_stalled(mean, goals, cost, iterate, num_iterations, generator)
             final_costs = cost(mean[:, None], goals)[:, 0]  # [N], at full precision whatever the autocast
-            if warm_start is not None and warm_costs is not None:
+            if keep:
+                assert warm_start is not None and warm_costs is not None
                 worse = final_costs > warm_costs  # [N]
                 mean = torch.where(worse[:, None, None], warm_start, mean)
                 final_costs = torch.where(worse, warm_costs, final_costs)
@@ -279,8 +280,7 @@ class MPPIPlanner:
         """Run up to ``iterations`` MPPI iterations on ``mean`` [N, T+1, D], stopping early once no plan improves.
 
         Every ``stop_check`` iterations the plans' costs [N] are evaluated; when none fell by more than
-        ``stop_tolerance`` since the last check, the loop ends. The noise is drawn one check's worth at a time, in
-        the order the uninterrupted loop would draw it.
+        ``stop_tolerance`` since the last check, the loop ends. The noise is drawn one check's worth at a time.
 
         :return: the number of iterations run.
         """

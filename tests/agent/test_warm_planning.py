@@ -189,3 +189,15 @@ def test_presets_merge_and_reject_unknown_names() -> None:
     with pytest.raises(ValueError, match="unknown agent preset"):
         preset_settings("faster", EBMPlannerAgent)
     assert np.isfinite(MPPIConfig(**PAPER_EBM["planner_config"]).temperature)
+
+
+def test_learn_budgets_are_read_from_any_planner_config() -> None:
+    from ebm_agent.config import learn_budgets
+    from ebm_agent.langevin import LangevinConfig
+
+    assert learn_budgets(MPPIConfig(**FAST_EBM["planner_config"])) == (20, 3)
+    assert learn_budgets(MPPIConfig(iterations=2, **FAST_EBM["planner_config"])) == (2, 2)  # at most `iterations`
+    assert learn_budgets(MPPIConfig()) == (None, None)
+    assert learn_budgets(ActionPlannerConfig(**FAST_ACTION_FF["planner_config"])) == (20, 3)
+    assert learn_budgets(ActionPlannerConfig(method="gradient", **FAST_ACTION_FF["planner_config"])) == (None, None)
+    assert learn_budgets(LangevinConfig()) == (None, None) and learn_budgets(None) == (None, None)
