@@ -31,20 +31,20 @@ test-slow: $(STAMP)
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
-	$(VENV)/bin/mypy ebm_agent envs baselines eval
+	$(VENV)/bin/mypy ebm_agent envs baselines eval benchmarks
 
 format: $(STAMP)
 	$(VENV)/bin/ruff format .
 	$(VENV)/bin/ruff check --fix .
 
 bench-envs: $(STAMP)
-	$(PY) -m envs.bench
+	$(PY) -m benchmarks.envs
 
 # The plan grid (quick), then learn(50,000) of the EBM agent and Action FF (fast preset; --learn-preset '' for the
 # defaults) and PPO on the particle, Reacher and the Sawyer with their time ratios against PPO (about an hour on 2 cores; BENCH_ARGS="--learn-steps 5000" is quicker).
 BENCH_ARGS ?= --quick --learn-steps 50000 --threads 1 --learn-preset fast
 bench: $(STAMP)
-	$(PY) -m eval.bench $(BENCH_ARGS)
+	$(PY) -m benchmarks $(BENCH_ARGS)
 
 # The paper's tables and figures at the paper's budgets (days of CPU time; resumable: rerun to continue, finished
 # runs are skipped), then docs/results.md. `make results RESULTS_JOBS=4` runs 4 at a time. The document is

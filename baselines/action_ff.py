@@ -12,7 +12,7 @@ from torch import Tensor, nn
 
 from baselines.action_planner import ActionPlanner, ActionPlannerConfig
 from ebm_agent.base import PlannerAgentBase, Segment
-from ebm_agent.config import OnlineConfig, learn_budgets, make_config
+from ebm_agent.config import OnlineConfig, learn_budgets, make_config, planner_horizon
 from ebm_agent.costs import wrap_difference
 from ebm_agent.energy import EnergyConfig, PeriodicFeatures
 from ebm_agent.fast_mlp import WorkspaceMLP
@@ -186,8 +186,10 @@ class ActionFFAgent(PlannerAgentBase):
     :param policy: ``"MultiInputPolicy"``.
     :param env: a goal-conditioned env, its id, or a VecEnv.
     :param learning_rate: Adam learning rate (1e-3, beta1 = 0 as the original's main optimiser).
-    :param horizon: T, planned actions.
-    :param planner_config: :class:`~baselines.action_planner.ActionPlannerConfig` or a dict of its fields.
+    :param horizon: T, planned actions; None: the planner's (``planner_config.horizon``, 10 by default), which the
+        agent reads back as ``self.horizon``.
+    :param planner_config: :class:`~baselines.action_planner.ActionPlannerConfig` or a dict of its fields (the agent
+        plans with a copy).
     :param network: the trunk's :class:`~ebm_agent.energy.EnergyConfig` (same as the EBM's by default).
     :param residual: predict the state change s' - s (default) instead of the absolute next state (the original's,
         ``False``); with absolute predictions the one-step errors on random data are a sizeable part of a move
@@ -214,7 +216,7 @@ class ActionFFAgent(PlannerAgentBase):
         policy: str | type[PlanningPolicy],
         env: GymEnv | str | None,
         learning_rate: float = 1e-3,
-        horizon: int = 10,
+        horizon: int | None = None,
         planner_config: ActionPlannerConfig | dict[str, Any] | None = None,
         network: EnergyConfig | dict[str, Any] | None = None,
         residual: bool = True,
@@ -229,8 +231,8 @@ class ActionFFAgent(PlannerAgentBase):
         device: torch.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
-        self.planner_config = make_config(ActionPlannerConfig, planner_config, "planner_config")
-        self.planner_config.horizon = horizon
+        self.planner_config = planner_horizon(make_config(ActionPlannerConfig, planner_config, "planner_config"), horizon)
+        horizon = self.planner_config.horizon
         self.network_config = make_config(EnergyConfig, network, "network")
         self.residual = residual
         self.clip_sigma = clip_sigma

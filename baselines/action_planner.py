@@ -9,7 +9,7 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ebm_agent.config import check_field_types, neutral_field
+from ebm_agent.config import check_field_types
 
 ForwardModel = Callable[[Tensor, Tensor], Tensor]
 """f(states [..., D], actions [..., A]) -> next states [..., D]."""
@@ -46,9 +46,9 @@ class ActionPlannerConfig:
     noise_std: float = 0.3
     step_size: float = 1.0
     gradient_noise: float = 0.01
-    warm_iterations: int | None = neutral_field(None)
-    train_iterations: int | None = neutral_field(None)
-    keep_warm_start: bool = neutral_field(False)
+    warm_iterations: int | None = None
+    train_iterations: int | None = None
+    keep_warm_start: bool = False
 
     def __post_init__(self) -> None:
         check_field_types(self)

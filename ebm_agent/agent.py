@@ -13,7 +13,7 @@ from stable_baselines3.common.type_aliases import GymEnv
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBuffer
-from ebm_agent.config import OnlineConfig, check_field_types, learn_budgets, make_config
+from ebm_agent.config import OnlineConfig, check_field_types, learn_budgets, make_config, planner_horizon
 from ebm_agent.costs import (
     AccelerationPrior,
     ExtraEnergy,
@@ -91,10 +91,11 @@ class EBMPlannerAgent(PlannerAgentBase):
     :param policy: ``"MultiInputPolicy"``.
     :param env: a goal-conditioned env, its id, or a VecEnv.
     :param learning_rate: Adam learning rate (1e-3).
-    :param horizon: T, planned transitions per plan (10).
-    :param planner: ``"mppi"`` or ``"langevin"``, or a :class:`~ebm_agent.planner.Planner` instance.
-    :param planner_config: :class:`MPPIConfig` / :class:`LangevinConfig` or a dict of its fields (its horizon is
-        replaced by ``horizon``).
+    :param horizon: T, planned transitions per plan; None: the planner's (``planner_config.horizon``, 10 by default).
+        The planner owns it: the agent sets it in its own copy of the planner config and reads ``self.horizon`` back.
+    :param planner: ``"mppi"`` or ``"langevin"``, or a :class:`~ebm_agent.planner.Planner` instance (its horizon).
+    :param planner_config: :class:`MPPIConfig` / :class:`LangevinConfig` or a dict of its fields; the agent plans with
+        a copy, so the caller's object is never changed.
     :param energy: :class:`EnergyConfig` or a dict of its fields.
     :param cost: :class:`CostConfig` or a dict of its fields.
     :param loss: ``"cd"`` (the paper's contrastive loss) or ``"infonce"``.
@@ -118,7 +119,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         policy: str | type[PlanningPolicy],
         env: GymEnv | str | None,
         learning_rate: float = 1e-3,
-        horizon: int = 10,
+        horizon: int | None = None,
         planner: str | Planner = "mppi",
         planner_config: MPPIConfig | LangevinConfig | dict[str, Any] | None = None,
         energy: EnergyConfig | dict[str, Any] | None = None,
@@ -143,10 +144,13 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.planner_kind = planner
         if isinstance(planner, str):
             config_type = PLANNERS[planner][1]
-            self.planner_config = make_config(config_type, planner_config, "planner_config")
-            self.planner_config.horizon = horizon  # type: ignore[union-attr,attr-defined]
+            self.planner_config = planner_horizon(make_config(config_type, planner_config, "planner_config"), horizon)
+            horizon = self.planner_config.horizon  # type: ignore[attr-defined]
         else:
             self.planner_config = None
+            if horizon not in (None, planner.horizon):
+                raise ValueError(f"horizon={horizon} but the planner instance plans {planner.horizon} steps; leave it out.")
+            horizon = planner.horizon
         self.energy_config = make_config(EnergyConfig, energy, "energy")
         self.cost_config = make_config(CostConfig, cost, "cost")
         self.loss = loss

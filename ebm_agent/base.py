@@ -124,7 +124,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     :param env: a goal-conditioned env (Dict observation with observation/achieved_goal/desired_goal), its id, or a
         VecEnv of several.
     :param learning_rate: learning rate of the model's optimiser.
-    :param horizon: T, number of planned transitions.
+    :param horizon: T, number of planned transitions: the planner's, which the subclass reads from it.
     :param online: :class:`OnlineConfig` (or a dict of its fields).
     :param inverse_dynamics: ``"ground_truth"`` (the env's ``inverse_dynamics``), ``"mlp"`` (learned), ``"rls"``
         (recursive least squares) or an :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance.

@@ -2,32 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
 import types
 import typing
-from dataclasses import MISSING, dataclass, fields
-from dataclasses import field as dataclass_field
+from dataclasses import dataclass, fields
 from typing import Any, TypeVar
 
 T = TypeVar("T")
-
-NEUTRAL_KEY = "neutral_value"
-"""Field metadata key of :func:`neutral_field`: the value at which the field changes nothing."""
-
-
-def neutral_field(neutral: Any, default: Any = MISSING) -> Any:
-    """A config field added after runs were recorded, declaring the value that keeps the behaviour from before it.
-
-    Recorded runs carry a digest of every default (``eval.provenance.defaults_digest``), so a plain new field would
-    retire all of them although its default changes nothing. A field declared with ``neutral_field(neutral)`` is
-    left out of that digest while its default equals ``neutral``; when its default is later changed to anything
-    else it enters the digest by itself, and the runs made before are retired as they should be. Use it only for a
-    *new* field: marking an existing field removes it from the digest and retires every recorded run.
-
-    :param neutral: the value that reproduces the behaviour from before the field existed.
-    :param default: the field's default (the neutral value when omitted).
-    :return: a dataclass field (immutable defaults only: numbers, strings, None, tuples).
-    """
-    return dataclass_field(default=neutral if default is MISSING else default, metadata={NEUTRAL_KEY: neutral})
 
 
 @dataclass
@@ -156,3 +137,30 @@ def learn_budgets(config: Any) -> tuple[int | None, int | None]:
     full = int(config.iterations)
     train, warm = config.train_iterations, config.warm_iterations
     return (None if train is None else min(train, full)), (None if warm is None else min(warm, full))
+
+
+def planner_horizon(config: T, horizon: int | None, owner: str = "planner_config") -> T:
+    """The planner config an agent plans with: a copy of ``config`` (never the caller's object), with ``horizon``.
+
+    The planner owns its horizon: an agent's ``horizon`` argument only sets it, and the agent then reads it back from
+    the planner. Given twice with two values (a ``horizon`` argument and a config whose horizon is not the
+    default), the agent cannot tell which is meant, so that is an error.
+
+    :param config: the planner config dataclass (a field ``horizon``).
+    :param horizon: T, or None to keep the config's.
+    :param owner: the config's parameter name, for messages.
+    :return: a copy of ``config`` with the horizon set.
+    :raises ValueError: a horizon that is not a positive int, or two different horizons.
+    """
+    if horizon is None:
+        return dataclasses.replace(config)  # type: ignore[type-var]
+    if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
+        raise ValueError(f"horizon must be a positive int (number of planned transitions), got {horizon!r}.")
+    default = {f.name: f.default for f in fields(config)}.get("horizon")  # type: ignore[arg-type]
+    given = config.horizon  # type: ignore[attr-defined]
+    if given not in (default, horizon):
+        raise ValueError(
+            f"horizon={horizon} and {owner}.horizon={given} disagree; give the horizon once (the horizon argument, or "
+            f"the planner config's field)."
+        )
+    return dataclasses.replace(config, horizon=horizon)  # type: ignore[type-var]

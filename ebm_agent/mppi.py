@@ -19,7 +19,7 @@ import torch
 from torch import Tensor
 
 from ebm_agent.bound_cost import bind_cost
-from ebm_agent.config import check_field_types, neutral_field
+from ebm_agent.config import check_field_types
 from ebm_agent.costs import PlanCost
 from ebm_agent.energy import EnergyModel
 from ebm_agent.planner import PlanResult, as_bounds, clip_states, initial_plan, validate_plan_inputs
@@ -47,7 +47,7 @@ CPU_CHUNK_TRANSITIONS = 4096
 chunk costs ~15 small ops besides the energy's matmuls, so small chunks pay that overhead many times, while one call
 on everything (81,920 rows) was 2-3x slower per transition (fresh multi-MB buffers page-fault). 4,096 was the fastest
 of 1,024 / 2,048 / 4,096 / 8,192 on all 7 large problems timed (D in {2, 20}, K in {256, 1024}, T in {20, 80}, 10
-iterations; 10-35% faster than 1,024): ``python -m eval.bench --quick --chunks 1024 2048 4096 8192``, docs/benchmarks.md.
+iterations; 10-35% faster than 1,024): ``python -m benchmarks --quick --chunks 1024 2048 4096 8192``, docs/benchmarks.md.
 The agent's default plan (K=80, T=10: 800 transitions) is one chunk either way. It was 1,024 before 2026-12-02, when
 fused layers measured 2x slower per transition from 2,048 rows on; on 2026-12-02 they were not (the chunk table of
 docs/benchmarks.md). Chunking only splits the matmuls by rows: on the benchmark machine the plans of 20 iterations
@@ -119,11 +119,11 @@ class MPPIConfig:
     compile_options: dict[str, Any] | None = None
     chunk_transitions: int | None = None
     autocast: str | None = None
-    warm_iterations: int | None = neutral_field(None)
-    train_iterations: int | None = neutral_field(None)
-    keep_warm_start: bool = neutral_field(False)
-    stop_tolerance: float | None = neutral_field(None)
-    stop_check: int = neutral_field(5)
+    warm_iterations: int | None = None
+    train_iterations: int | None = None
+    keep_warm_start: bool = False
+    stop_tolerance: float | None = None
+    stop_check: int = 5
 
     def __post_init__(self) -> None:
         check_field_types(self)

@@ -57,10 +57,6 @@ class ReacherEnv(gym.Env):
     frame_skip: int = 2
     """Physics steps per env step (Reacher-v4)."""
 
-    inverse_dynamics_arguments: ClassVar[dict[str, Any]] = {"inverse_angle_weight": 1.0}
-    """Constructor arguments that change only ``inverse_dynamics``, each with the value that reproduces runs made
-    before it existed (``eval.registry.env_inverse_dynamics_defaults``)."""
-
     def __init__(
         self,
         goal: tuple[float, float] | np.ndarray | None = DEFAULT_GOAL,

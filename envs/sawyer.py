@@ -81,10 +81,6 @@ class SawyerReachEnv(gym.Env):
     frame_skip: int = 5
     """Physics steps (2.5 ms each) per env step, as in Metaworld."""
 
-    inverse_dynamics_arguments: ClassVar[dict[str, Any]] = {"inverse_finger_weight": 0.0, "inverse_rescue_ceiling": None}
-    """Constructor arguments that change only ``inverse_dynamics``, each with the value that reproduces runs made
-    before it existed (``eval.registry.env_inverse_dynamics_defaults``)."""
-
     def __init__(
         self,
         goal: str | None = "fixed",

@@ -6,14 +6,12 @@ without) every agent package, and a process-pool worker imports only the agent i
 
 from __future__ import annotations
 
-import dataclasses
 import importlib
-import inspect
-import re
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
+
+from eval.digest import class_defaults, env_inverse_dynamics_defaults
 
 if TYPE_CHECKING:  # SB3 (and torch) load only when an agent is built, so `ebm-eval --help` answers at once
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -57,8 +55,7 @@ class AgentSpec:
     :param description: one line for ``ebm-eval --help``.
     :param defaults: ``defaults(env_id, preset) -> dict``: the agent's settings for that env under an agent preset
         (``ebm_agent.presets``; ``""``: the library's defaults), JSON-able, whose digest every finished run stores, so
-        that a change of a library default retires the runs made before it (``eval.provenance.defaults_digest``);
-        None: not tracked.
+        that a change of a library default retires the runs made before it (``eval.digest``); None: not tracked.
     :param class_name: the agent's class name, by which ``ebm_agent.presets.PRESETS`` names its settings (None: no
         preset changes this agent).
     """
@@ -69,71 +66,6 @@ class AgentSpec:
     description: str = ""
     defaults: Callable[[str, str], dict[str, Any]] | None = None
     class_name: str | None = None
-
-
-NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "stats_window_size"})
-"""Constructor arguments that do not change what a run measures (left out of ``class_defaults``)."""
-
-
-def _plain_default(value: Any) -> Any:
-    if value is None or isinstance(value, (bool, int, float, str)):
-        return value
-    if isinstance(value, (tuple, list)):
-        return [_plain_default(item) for item in value]
-    return type(value).__name__  # an object's repr may hold its address: its type is what is stable
-
-
-def class_defaults(agent_class: type, overrides: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The default settings of an agent class: its constructor's defaults and, for every config dataclass its
-    annotations name (``MPPIConfig | dict | None``), that dataclass's default fields.
-
-    Left out: the arguments in ``NOT_MEASURED``; config fields declared with ``ebm_agent.config.neutral_field``
-    while at their neutral value; and constructor arguments listed in the class's ``neutral_arguments``
-    (``{name: value}``) while their default is that value. Those were added after runs were recorded and change
-    nothing at that value, so adding them does not retire the runs.
-
-    :param agent_class: the class.
-    :param overrides: constructor arguments that replace defaults (an agent preset, ``ebm_agent.presets``); a dict
-        given for a config argument replaces that config's fields. The neutral rule above is applied after them, so
-        a preset that restores the settings of earlier runs has their digest.
-    :return: ``{argument: default, "argument:ConfigName": {field: default}}``.
-    """
-    overrides = overrides or {}
-    module = vars(sys.modules[agent_class.__module__])
-    neutral_arguments = getattr(agent_class, "neutral_arguments", {})
-    defaults: dict[str, Any] = {}
-    for name, parameter in inspect.signature(agent_class).parameters.items():
-        if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
-            continue
-        override = overrides.get(name)
-        value = parameter.default if (name not in overrides or isinstance(override, dict)) else override
-        if name in neutral_arguments and value == neutral_arguments[name]:
-            continue  # an argument added later, at the value that changes nothing
-        defaults[name] = _plain_default(value)
-        for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
-            config = module.get(token)
-            if isinstance(config, type) and dataclasses.is_dataclass(config):
-                fields = override if isinstance(override, dict) else None
-                try:
-                    defaults[f"{name}:{config.__name__}"] = _config_defaults(config, fields)
-                except TypeError:  # a config without defaults for every field, or one the preset's fields are not for
-                    try:
-                        defaults[f"{name}:{config.__name__}"] = _config_defaults(config)
-                    except TypeError:
-                        continue
-    return defaults
-
-
-def _config_defaults(config: type, fields: dict[str, Any] | None = None) -> dict[str, Any]:
-    """A config dataclass's fields (its defaults, less ``fields`` given), less those at their declared neutral value
-    (``neutral_field``)."""
-    from ebm_agent.config import NEUTRAL_KEY
-
-    values = dataclasses.asdict(config(**(fields or {})))
-    for item in dataclasses.fields(config):
-        if NEUTRAL_KEY in item.metadata and values[item.name] == item.metadata[NEUTRAL_KEY]:
-            del values[item.name]
-    return values
 
 
 def _class_defaults_of(
@@ -151,38 +83,6 @@ def _class_defaults_of(
         return settings
 
     return defaults
-
-
-def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
-    """The env's constructor defaults that change only its ``inverse_dynamics``, where they differ from the value
-    that reproduces earlier runs.
-
-    An env class lists them as ``inverse_dynamics_arguments = {name: value that changes nothing}``; agents that use the
-    env's ground-truth inverse dynamics (the EBM) add the differing ones to their defaults digest, so that changing
-    such a default retires their runs on that env and leaves every other agent's runs (which never call it) valid.
-
-    :param env_id: a registered Gymnasium id.
-    :return: ``{argument: default}`` (empty for an unknown id or an env without such arguments).
-    """
-    import gymnasium as gym
-
-    try:
-        entry_point = gym.spec(env_id).entry_point
-    except gym.error.Error:
-        return {}
-    if not isinstance(entry_point, str):
-        return {}
-    module_name, _, attribute = entry_point.partition(":")
-    env_class = getattr(importlib.import_module(module_name), attribute, None)
-    arguments = getattr(env_class, "inverse_dynamics_arguments", {})
-    if env_class is None or not arguments:
-        return {}
-    parameters = inspect.signature(env_class).parameters
-    return {
-        name: _plain_default(parameters[name].default)
-        for name, neutral in arguments.items()
-        if name in parameters and parameters[name].default != neutral
-    }
 
 
 def ppo_defaults(env_id: str, preset: str = "") -> dict[str, Any]:
@@ -353,11 +253,8 @@ def get_agent(name: str) -> AgentSpec:
 
 __all__ = [
     "AGENTS",
-    "NOT_MEASURED",
     "AgentFactory",
     "AgentSpec",
-    "class_defaults",
-    "env_inverse_dynamics_defaults",
     "get_agent",
     "ppo_defaults",
     "register_agent",

@@ -13,7 +13,7 @@ nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$out
 "$python" -c "import torch; assert torch.cuda.is_available(), 'torch sees no CUDA device'; print('torch', torch.__version__, 'CUDA', torch.version.cuda)" || exit 1
 timeout 180 "$python" -m pytest -q -p no:cacheprovider tests/agent/test_cuda.py tests/agent/test_mppi_speed_paths.py 2>&1 | tee "$out/cuda_tests.log"
 tests=${PIPESTATUS[0]}
-timeout 380 "$python" -m eval.bench --devices cuda --learn-device cuda --threads 4 --repeats 3 --learn-steps 2000 \
+timeout 380 "$python" -m benchmarks --devices cuda --learn-device cuda --threads 4 --repeats 3 --learn-steps 2000 \
     --quality 0 --note "scripts/cuda_check.sh: CUDA rows only (--devices cuda); learn() on CUDA" \
     --out "$out/bench_cuda.md" 2>&1 | tee "$out/bench_stdout.log"
 bench=${PIPESTATUS[0]}

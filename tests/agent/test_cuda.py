@@ -86,7 +86,7 @@ def test_cuda_iterations_never_synchronise_with_the_host(autocast: str | None) -
 
 
 def test_the_learn_benchmark_measures_cuda_memory() -> None:
-    from eval.bench import learn_worker
+    from benchmarks.learn import learn_worker
 
     result = learn_worker("ebm", 64, threads=1, device="cuda")
     assert result["timesteps"] >= 64 and result["gpu_peak_mb"] > 0

@@ -258,7 +258,7 @@ def test_speed_options_are_validated_and_reach_the_config() -> None:
 
 
 def test_the_chunk_benchmark_times_every_chunk_size_it_is_given():
-    from eval.bench import bench_chunks
+    from benchmarks.planner import bench_chunks
 
     medians = bench_chunks(2, 8, 5, 1, chunks=(16, 0), repeats=1, compare=False)
     assert set(medians) == {"16", "0"} and all(value > 0 for value in medians.values())

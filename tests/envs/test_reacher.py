@@ -211,7 +211,7 @@ def test_render_rgb_array(gl_backend):
 
 
 def test_bench_reports_reacher_throughput():
-    from envs.bench import bench_env, format_table
+    from benchmarks.envs import bench_env, format_table
 
     result = bench_env("ebm/Reacher-v0", steps=60, inverse_batch=8)
     assert result.env_steps_per_s > 0 and result.inverse_per_s > 0

@@ -5,20 +5,20 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 import pytest
 
-from ebm_agent.config import neutral_field
 from eval.cli import main
+from eval.digest import class_defaults, env_inverse_dynamics_defaults, neutral_settings
 from eval.experiment_runner import figure_complete, run_parts, unique_jobs
 from eval.experiments import EXPERIMENTS, build_parts, make_context, select_parts
 from eval.jobs import Job, JobResult, run_job
 from eval.parts import SCALES, Part
 from eval.pretraining import dataset_path, repeat_transitions
 from eval.provenance import completed_result, defaults_digest, job_fingerprint, read_provenance, read_sessions
-from eval.registry import AGENTS, class_defaults
+from eval.registry import AGENTS
 
 pytest.importorskip("envs.particle")
 
@@ -427,18 +427,16 @@ def test_class_defaults_hold_the_config_fields_and_not_what_does_not_measure():
 @dataclass
 class _ToyConfigLater:
     width: int = 128
-    damping: float = neutral_field(0.0)  # added later; 0.0 keeps the old behaviour
+    damping: float = 0.0  # added later; 0.0 keeps the old behaviour
 
 
 @dataclass
 class _ToyConfigChanged:
     width: int = 128
-    damping: float = neutral_field(0.0, default=0.5)  # its default changed: now it matters
+    damping: float = 0.5  # its default changed: now it matters
 
 
 class _ToyAgentLater(_ToyAgent):
-    neutral_arguments: ClassVar[dict[str, Any]] = {"clip": None}
-
     def __init__(
         self,
         policy: str,
@@ -453,8 +451,6 @@ class _ToyAgentLater(_ToyAgent):
 
 
 class _ToyAgentChanged(_ToyAgent):
-    neutral_arguments: ClassVar[dict[str, Any]] = {"clip": None}
-
     def __init__(
         self,
         policy: str,
@@ -468,19 +464,41 @@ class _ToyAgentChanged(_ToyAgent):
         pass
 
 
+_TOY_RULES = {
+    "config_fields": {"_ToyConfigLater": {"damping": 0.0}, "_ToyConfigChanged": {"damping": 0.0}},
+    "arguments": {"_ToyAgentLater": {"clip": None}, "_ToyAgentChanged": {"clip": None}},
+}
+
+
 def test_fields_added_at_their_neutral_value_leave_the_defaults_digest_alone():
-    before = class_defaults(_ToyAgent)
-    renamed = {key.replace("_ToyConfigLater", "_ToyConfig"): value for key, value in class_defaults(_ToyAgentLater).items()}
+    before = class_defaults(_ToyAgent, neutral=_TOY_RULES)
+    later = class_defaults(_ToyAgentLater, neutral=_TOY_RULES)
+    renamed = {key.replace("_ToyConfigLater", "_ToyConfig"): value for key, value in later.items()}
     assert renamed == before  # a new field and a new argument at their neutral values retire nothing
-    changed = class_defaults(_ToyAgentChanged)
+    changed = class_defaults(_ToyAgentChanged, neutral=_TOY_RULES)
     assert changed["config:_ToyConfigChanged"] == {"width": 128, "damping": 0.5} and changed["clip"] == 2.0
-    assert _ToyConfigLater().damping == 0.0 and _ToyConfigChanged().damping == 0.5
+    unruled = class_defaults(_ToyAgentLater, neutral={})  # without the rules, the new settings enter the digest
+    assert unruled["clip"] is None and unruled["config:_ToyConfigLater"]["damping"] == 0.0
+
+
+def test_the_library_planners_new_fields_and_the_horizon_keep_the_recorded_digest():
+    """The rules file lists the planner fields added after the records, and the horizon that became None."""
+    from baselines.action_ff import ActionFFAgent
+    from ebm_agent.agent import EBMPlannerAgent
+
+    rules = neutral_settings()
+    assert rules["config_fields"]["MPPIConfig"]["warm_iterations"] is None
+    for agent_class in (EBMPlannerAgent, ActionFFAgent):
+        settings = class_defaults(agent_class)
+        assert settings["horizon"] == 10  # the default None stands for the planner's 10, as recorded
+        config = next(value for key, value in settings.items() if key.startswith("planner_config:"))
+        assert "warm_iterations" not in config and config["horizon"] == 10
+        assert class_defaults(agent_class, {"horizon": 20})["horizon"] == 20
 
 
 def test_env_inverse_dynamics_defaults_retire_only_the_runs_that_use_them():
     """SawyerReach's finger weight changes only its inverse dynamics: the EBM's digest there sees it, no other."""
     from eval.provenance import agent_defaults_digest
-    from eval.registry import env_inverse_dynamics_defaults
 
     sawyer = {"inverse_finger_weight": 100.0, "inverse_rescue_ceiling": 0.1}
     assert env_inverse_dynamics_defaults("ebm/SawyerReach-v0") == sawyer

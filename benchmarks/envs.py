@@ -1,4 +1,4 @@
-"""Throughput of every registered environment: ``python -m envs.bench``.
+"""Throughput of every registered environment: ``python -m benchmarks.envs`` (``make bench-envs``).
 
 Prints a markdown table with, per env id of ``envs.ENV_IDS``: env steps per second through ``gym.make`` (the
 wrappers a user gets, random actions, resetting when an episode ends), physics steps per second where the env is
@@ -93,7 +93,7 @@ def main(argv: list[str] | None = None) -> None:
 
     :param argv: arguments (default: ``sys.argv``).
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.envs", description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", help="short names or ids (default: all of envs.ENV_IDS)")
     parser.add_argument("--steps", type=int, default=5000, help="env steps timed per env")
     parser.add_argument("--inverse-batch", type=int, default=256, help="transitions in the inverse-dynamics batch")

@@ -1,0 +1,137 @@
+"""The settings an agent runs with, as a digest that retires recorded runs when a library default changes.
+
+Every finished run stores the digest of its agent's settings on its env (``AgentSpec.defaults``); a run whose digest
+differs from today's is no longer current. The library knows nothing of this: which settings were added at a value
+that changes nothing (and so must not retire the runs made before them) is harness data, ``neutral_settings.yaml``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import importlib
+import inspect
+import re
+import sys
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+NEUTRAL_FILE = Path(__file__).with_name("neutral_settings.yaml")
+"""The settings added after runs were recorded, with the values at which they change nothing."""
+
+NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init_setup_model", "stats_window_size"})
+"""Constructor arguments that do not change what a run measures (left out of ``class_defaults``)."""
+
+
+@functools.lru_cache(maxsize=1)
+def neutral_settings() -> dict[str, dict[str, dict[str, Any]]]:
+    """``neutral_settings.yaml``: ``{section: {class name: {name: value}}}`` (sections ``config_fields``,
+    ``arguments``, ``recorded_as``, ``env_inverse_dynamics``)."""
+    data = yaml.safe_load(NEUTRAL_FILE.read_text()) or {}
+    sections = ("config_fields", "arguments", "recorded_as", "env_inverse_dynamics")
+    return {section: dict(data.get(section) or {}) for section in sections}
+
+
+def _plain(value: Any) -> Any:
+    if value is None or isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, (tuple, list)):
+        return [_plain(item) for item in value]
+    return type(value).__name__  # an object's repr may hold its address: its type is what is stable
+
+
+def class_defaults(
+    agent_class: type, overrides: dict[str, Any] | None = None, neutral: dict[str, dict[str, dict[str, Any]]] | None = None
+) -> dict[str, Any]:
+    """The default settings of an agent class: its constructor's defaults and, for every config dataclass its
+    annotations name (``MPPIConfig | dict | None``), that dataclass's default fields.
+
+    Left out: the arguments in ``NOT_MEASURED``, and the settings ``neutral`` lists while they have their neutral
+    value (constructor ``arguments`` and ``config_fields``). An argument whose default is None and which
+    ``recorded_as`` lists counts as the value it stands for.
+
+    :param agent_class: the class.
+    :param overrides: constructor arguments that replace defaults (an agent preset, ``ebm_agent.presets``); a dict
+        given for a config argument replaces that config's fields. The neutral rules apply after them, so a preset
+        that restores the settings of earlier runs has their digest.
+    :param neutral: the rules (default: ``neutral_settings()``).
+    :return: ``{argument: default, "argument:ConfigName": {field: default}}``.
+    """
+    overrides = overrides or {}
+    neutral = neutral_settings() if neutral is None else neutral
+    name_of = agent_class.__name__
+    neutral_arguments = neutral.get("arguments", {}).get(name_of, {})
+    recorded_as = neutral.get("recorded_as", {}).get(name_of, {})
+    module = vars(sys.modules[agent_class.__module__])
+    defaults: dict[str, Any] = {}
+    for name, parameter in inspect.signature(agent_class).parameters.items():
+        if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
+            continue
+        override = overrides.get(name)
+        value = parameter.default if (name not in overrides or isinstance(override, dict)) else override
+        if name in neutral_arguments and value == neutral_arguments[name]:
+            continue  # an argument added later, at the value that changes nothing
+        if value is None and name in recorded_as:
+            value = recorded_as[name]
+        defaults[name] = _plain(value)
+        for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
+            config = module.get(token)
+            if isinstance(config, type) and dataclasses.is_dataclass(config):
+                fields = override if isinstance(override, dict) else None
+                key = f"{name}:{config.__name__}"
+                try:
+                    defaults[key] = _config_defaults(config, fields, neutral)
+                except TypeError:  # a config without defaults for every field, or one the preset's fields are not for
+                    try:
+                        defaults[key] = _config_defaults(config, None, neutral)
+                    except TypeError:
+                        continue
+    return defaults
+
+
+Rules = dict[str, dict[str, dict[str, Any]]]
+
+
+def _config_defaults(config: type, fields: dict[str, Any] | None, neutral: Rules) -> dict[str, Any]:
+    """A config dataclass's fields (its defaults, less ``fields`` given), less those at their neutral value."""
+    values = dataclasses.asdict(config(**(fields or {})))
+    for name, value in neutral.get("config_fields", {}).get(config.__name__, {}).items():
+        if name in values and values[name] == value:
+            del values[name]
+    return values
+
+
+def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
+    """The env's constructor defaults that change only its ``inverse_dynamics``, where they differ from the value
+    that reproduces earlier runs (``neutral_settings.yaml``, ``env_inverse_dynamics``).
+
+    Agents that use the env's ground-truth inverse dynamics (the EBM) add these to their digest, so that changing
+    such a default retires their runs on that env and leaves every other agent's runs (which never call it) valid.
+
+    :param env_id: a registered Gymnasium id.
+    :return: ``{argument: default}`` (empty for an unknown id or an env without such arguments).
+    """
+    import gymnasium as gym
+
+    try:
+        entry_point = gym.spec(env_id).entry_point
+    except gym.error.Error:
+        return {}
+    if not isinstance(entry_point, str):
+        return {}
+    module_name, _, attribute = entry_point.partition(":")
+    arguments = neutral_settings()["env_inverse_dynamics"].get(attribute, {})
+    env_class = getattr(importlib.import_module(module_name), attribute, None) if arguments else None
+    if env_class is None:
+        return {}
+    parameters = inspect.signature(env_class).parameters
+    return {
+        name: _plain(parameters[name].default)
+        for name, value in arguments.items()
+        if name in parameters and parameters[name].default != value
+    }
+
+
+__all__ = ["NEUTRAL_FILE", "NOT_MEASURED", "class_defaults", "env_inverse_dynamics_defaults", "neutral_settings"]

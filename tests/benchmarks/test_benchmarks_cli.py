@@ -1,0 +1,23 @@
+"""The arguments of ``python -m benchmarks`` (named apart from tests/eval/test_cli.py: test modules share one namespace)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from benchmarks.cli import main
+
+
+@pytest.mark.skipif(torch.cuda.is_available(), reason="checks the refusal on a machine without CUDA")
+@pytest.mark.parametrize("argv", [["--devices", "cuda"], ["--learn-device", "cuda"]])
+def test_asking_for_cuda_without_it_is_a_clear_error(argv, capsys) -> None:
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    assert "torch sees no CUDA device" in capsys.readouterr().err
+
+
+def test_bad_env_counts_are_refused(capsys) -> None:
+    with pytest.raises(SystemExit):
+        main(["--envs", "0"])
+    assert "--envs must be >= 1" in capsys.readouterr().err
