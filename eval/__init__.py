@@ -8,8 +8,9 @@ imported lazily by the factories of ``eval.registry.AGENTS``, so importing this 
 from __future__ import annotations
 
 from eval.executors import Executor, LocalExecutor, executor_from_name
-from eval.jobs import Job, JobResult, run_job
+from eval.jobs import Job, JobResult
 from eval.registry import AGENTS, AgentSpec, get_agent, register_agent
+from eval.run import run_job
 
 __all__ = [
     "AGENTS",

@@ -14,6 +14,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+import envs  # noqa: F401  registers the ebm/ ids
+
 
 @dataclass(frozen=True)
 class KnownOptimum:
@@ -102,7 +104,6 @@ def compute_anchors(
     :param random_episodes: number of random-policy episodes.
     :return: the anchors.
     """
-    import envs  # noqa: F401  registers the ebm/ ids
 
     if random_episodes < 1:
         raise ValueError(f"random_episodes must be at least 1, got {random_episodes}")

@@ -32,8 +32,11 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
-from envs import ENV_IDS, resolve_env_id
+from envs import ENV_IDS, PAPER_EVAL_KWARGS, resolve_env_id
+from eval.anchors import compute_anchors
 from eval.executors import executor_from_name
+from eval.experiment_runner import run_experiments, selected_parts
+from eval.experiments import EXPERIMENTS
 from eval.flags import (
     DEFAULTS,
     EXPERIMENT_ONLY,
@@ -44,8 +47,12 @@ from eval.flags import (
     build_parser,
 )
 from eval.jobs import Job, library_versions, to_plain
+from eval.parts import SCALES
+from eval.plots import plot_learning_curves  # matplotlib and scipy load only for a real sweep
 from eval.presets import load_preset
+from eval.records import default_docs, default_records
 from eval.registry import AGENTS
+from eval.report import write_csv, write_markdown
 
 
 def _hyperparams_by_agent(pairs: Sequence[tuple[str, Any]], known: Sequence[str]) -> dict[str, dict[str, Any]]:
@@ -238,13 +245,11 @@ def evaluation_kwargs(env_id: str, settings: dict[str, Any]) -> dict[str, Any]:
     :param settings: the merged CLI settings.
     :return: the kwargs.
     """
-    from envs import PAPER_EVAL_KWARGS
 
     return {**PAPER_EVAL_KWARGS.get(env_id, {}), **settings["env_kwargs"], **settings["eval_env_kwargs"]}
 
 
 def _anchors_for(jobs: Sequence[Job]) -> dict[str, Any]:
-    from eval.anchors import compute_anchors
 
     anchors: dict[str, Any] = {}
     for job in jobs:
@@ -265,9 +270,6 @@ def resolve_experiment_settings(args: argparse.Namespace) -> dict[str, Any]:
     :return: experiments, parts, scale, seeds, out, docs, device and the executor's settings.
     :raises ValueError: for a flag that does not apply, an unknown experiment or scale.
     """
-    from eval.experiments import EXPERIMENTS
-    from eval.parts import SCALES
-    from eval.records import default_docs, default_records
 
     given = [key for key in (*SWEEP_ONLY, *SWEEP_ONLY_MORE) if getattr(args, key, None) is not None]
     if given:
@@ -318,8 +320,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.experiment is not None or args.report_only:
-        from eval.experiment_runner import run_experiments, selected_parts
-
         try:
             experiment_settings = resolve_experiment_settings(args)
             parts = selected_parts(experiment_settings)
@@ -337,9 +337,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         executor = executor_from_name(settings["executor"], **executor_options(settings))
     except (ValueError, TypeError) as error:
         parser.error(str(error))  # exits 2, like any bad flag
-
-    from eval.plots import plot_learning_curves  # matplotlib and scipy load only for a real sweep
-    from eval.report import write_csv, write_markdown
 
     progress = not args.no_progress
     out = Path(settings["out"])

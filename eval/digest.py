@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import yaml
 
 NEUTRAL_FILE = Path(__file__).with_name("neutral_settings.yaml")
@@ -113,7 +114,6 @@ def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
     :param env_id: a registered Gymnasium id.
     :return: ``{argument: default}`` (empty for an unknown id or an env without such arguments).
     """
-    import gymnasium as gym
 
     try:
         entry_point = gym.spec(env_id).entry_point

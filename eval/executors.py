@@ -17,9 +17,12 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Any, Protocol, runtime_checkable
 
+import torch
 from tqdm.auto import tqdm
 
-from eval.jobs import Job, JobResult, run_job
+from eval.jobs import Job, JobResult
+from eval.run import run_job
+from eval.stop import install_worker_handlers, stop_at_next_step, stop_received
 
 Runner = Callable[[Job], JobResult]
 
@@ -40,14 +43,12 @@ class Executor(Protocol):
 
 def _limit_threads(threads: int) -> None:
     """One torch thread per worker, so that ``--jobs`` workers do not fight over the cores."""
-    import torch
 
     torch.set_num_threads(threads)
 
 
 def _start_worker(threads: int) -> None:
     """Pool initializer: limit torch's threads, and remember stop signals rather than die of them (``eval.stop``)."""
-    from eval.stop import install_worker_handlers
 
     _limit_threads(threads)
     install_worker_handlers()
@@ -55,7 +56,6 @@ def _start_worker(threads: int) -> None:
 
 def _pool_job(runner: Runner, job: Job) -> JobResult:
     """Run ``job`` in a pool worker, unless the worker has received a stop signal."""
-    from eval.stop import stop_received
 
     if stop_received() is not None:
         return _not_started(job)
@@ -126,7 +126,6 @@ class LocalExecutor:
         return result
 
     def _run_in_pool(self, jobs: list[Job], bar: Any) -> list[JobResult]:
-        from eval.stop import stop_at_next_step
 
         # spawn, not fork: torch and MuJoCo state must not be copied into children mid-flight.
         context = multiprocessing.get_context("spawn")

@@ -13,8 +13,12 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 
+import envs  # noqa: F401  (registers the ebm/ ids)
 from ebm_agent import EBMPlannerAgent
+from envs.sawyer import SawyerReachEnv
+from eval.jobs import EVAL_SEED_OFFSET
 
 __all__ = ["PlanStep", "load_traced_agent", "sawyer_real_transitions", "trace_parser", "trace_plans"]
 
@@ -78,7 +82,6 @@ def trace_parser(description: str, env_id: str, steps: int, every: int, weight_f
     :param weight_flag: the env weight's flag (``--finger-weight`` sets ``inverse_finger_weight``).
     :return: the parser.
     """
-    from eval.jobs import EVAL_SEED_OFFSET
 
     name = "inverse_" + weight_flag.removeprefix("--").replace("-", "_")
     parser = argparse.ArgumentParser(description=description)
@@ -101,9 +104,6 @@ def load_traced_agent(
     :param env_id: the env.
     :return: the arguments, the env and the agent.
     """
-    import torch
-
-    import envs  # noqa: F401  (registers the ebm/ ids)
 
     args = parser.parse_args(argv)
     if args.steps < 1 or args.every < 1:
@@ -126,7 +126,6 @@ def sawyer_real_transitions(count: int, seed: int = 0, actions: str = "mixed") -
     :return: states [B, 20], next states [B, 20] and the actions [B, 7] that made them.
     :raises ValueError: for another ``actions``.
     """
-    from envs.sawyer import SawyerReachEnv
 
     if actions not in ("mixed", "exploration", "uniform"):
         raise ValueError(f"actions must be 'mixed', 'exploration' or 'uniform', got {actions!r}.")

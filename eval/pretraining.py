@@ -44,9 +44,15 @@ from typing import TYPE_CHECKING, Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
 
+import envs  # noqa: F401  registers the ebm/ ids
+from ebm_agent import EBMPlannerAgent
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
+from ebm_agent.presets import merge_settings, preset_settings
 from eval.jobs import Job, to_plain
+from eval.resume import read_checkpoint_files, write_checkpoint_files
 from eval.stop import CheckpointOnStop, raise_if_stopped, stop_at_next_step
 
 if TYPE_CHECKING:
@@ -137,7 +143,6 @@ def collector_settings(job: Job) -> dict[str, Any]:
     :param job: a pretrained job.
     :return: a new dict.
     """
-    from ebm_agent.presets import merge_settings, preset_settings
 
     return merge_settings(preset_settings(job.preset, "EBMPlannerAgent"), job.dataset_kwargs)
 
@@ -219,12 +224,6 @@ def collect_directed_transitions(
         all processes (``collect_time_s``; ``collect_time_before_s`` of the earlier ones) and where it resumed
         (``resumed_at``).
     """
-    from stable_baselines3.common.monitor import Monitor
-    from stable_baselines3.common.vec_env import DummyVecEnv
-
-    import envs  # noqa: F401  registers the ebm/ ids
-    from ebm_agent import EBMPlannerAgent
-    from eval.resume import read_checkpoint_files
 
     if checkpoint_every < 1:
         raise ValueError(f"checkpoint_every must be a positive number of transitions, got {checkpoint_every}")
@@ -322,7 +321,6 @@ class CollectionCheckpoint(BaseCallback):
 
         Called every ``every`` transitions, and by ``eval.stop.CheckpointOnStop`` where a stop was asked for.
         """
-        from eval.resume import write_checkpoint_files
 
         steps = int(self.model.num_timesteps)
         if steps < self.total:

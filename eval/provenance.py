@@ -20,7 +20,10 @@ from dataclasses import MISSING, asdict, fields
 from pathlib import Path
 from typing import Any
 
+import torch
+
 from eval.jobs import Job, JobResult, to_plain
+from eval.registry import AGENTS
 
 NOT_FINGERPRINTED = ("out_dir", "device", "verbose", "progress_bar", "preset")
 """Job fields that do not change what a run measures (``preset`` does, but only through the agent's settings, which
@@ -55,7 +58,6 @@ def job_fingerprint(job: Job) -> str:
 
 @functools.lru_cache(maxsize=64)
 def _defaults_digest(agent: str, env_id: str, preset: str = "") -> str | None:
-    from eval.registry import AGENTS
 
     spec = AGENTS.get(agent)
     if spec is None or spec.defaults is None:
@@ -154,7 +156,6 @@ def machine_info(device: Any = None) -> dict[str, Any]:
     :param device: the torch device the model ran on (None: not recorded).
     :return: CPU model, logical cores, torch threads, GPU name (None without CUDA), platform and device.
     """
-    import torch
 
     cpu = platform.processor() or platform.machine()
     try:

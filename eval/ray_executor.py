@@ -2,7 +2,7 @@
 
 Only ``executor_from_name("ray")`` (``ebm-eval --executor ray``) imports this module, so nothing else loads Ray.
 
-Each ``Job`` becomes one Ray task with its own CPU/GPU request that runs ``eval.jobs.run_job``; the results are
+Each ``Job`` becomes one Ray task with its own CPU/GPU request that runs ``eval.run.run_job``; the results are
 gathered in completion order (``ray.wait``) and returned in the jobs' order. ``run_job`` never raises, so a
 task fails only when its worker dies (killed, out of memory, segfault): Ray retries it ``max_retries`` times and
 a task that still fails becomes a failed ``JobResult`` with Ray's error, the other results kept.
@@ -32,7 +32,8 @@ import yaml
 from tqdm.auto import tqdm
 
 from eval.executors import Runner
-from eval.jobs import Job, JobResult, run_job
+from eval.jobs import Job, JobResult
+from eval.run import run_job
 
 RunFiles = dict[str, bytes]
 """A run's files: path relative to the sweep's out dir (POSIX) -> content."""

@@ -279,7 +279,7 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
     summary = RecordsSummary()
     if not records_dir.is_dir():
         return summary
-    from eval.jobs import run_in_progress
+    from eval.run import run_in_progress
 
     for relative in finished_runs(records_dir):
         target = out_dir / relative

@@ -11,6 +11,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
+import gymnasium as gym
+from stable_baselines3 import PPO
+from stable_baselines3.common.env_util import make_vec_env
+
+from baselines.ppo import exact_budget_callback, make_ppo, ppo_hyperparams
+from ebm_agent.presets import preset_settings
 from eval.digest import class_defaults, env_inverse_dynamics_defaults
 
 if TYPE_CHECKING:  # SB3 (and torch) load only when an agent is built, so `ebm-eval --help` answers at once
@@ -72,7 +78,6 @@ def _class_defaults_of(
     module: str, class_name: str, env_inverse_dynamics: bool = False
 ) -> Callable[[str, str], dict[str, Any]]:
     def defaults(env_id: str, preset: str = "") -> dict[str, Any]:
-        from ebm_agent.presets import preset_settings
 
         agent_class = getattr(importlib.import_module(module), class_name)
         settings = class_defaults(agent_class, preset_settings(preset, class_name))
@@ -91,16 +96,12 @@ def ppo_defaults(env_id: str, preset: str = "") -> dict[str, Any]:
     :param env_id: the env.
     :return: ``{"table": ..., "PPO": ...}``.
     """
-    from stable_baselines3 import PPO
-
-    from baselines.ppo import ppo_hyperparams
 
     return {"table": ppo_hyperparams(env_id), "PPO": class_defaults(PPO)}
 
 
 def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
     """``MultiInputPolicy`` for Dict observations (the ``ebm/`` goal envs), ``MlpPolicy`` otherwise."""
-    import gymnasium as gym
 
     env = gym.make(env_id, **env_kwargs)
     try:
@@ -111,7 +112,6 @@ def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
 
 def _training_env(env_id: str, env_kwargs: dict[str, Any], seed: int, hyperparams: dict[str, Any]) -> Any:
     """A Monitor-wrapped ``VecEnv`` with ``hyperparams.pop("n_envs", 1)`` copies of the env."""
-    from stable_baselines3.common.env_util import make_vec_env
 
     n_envs = int(hyperparams.pop("n_envs", 1))
     return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
@@ -168,7 +168,6 @@ def make_ppo_agent(
     verbose: int = 0,
 ) -> BaseAlgorithm:
     """Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``. See ``AgentFactory``."""
-    from baselines.ppo import make_ppo
 
     # make_ppo builds its own VecEnv from the id, with the tuned n_envs (``n_envs`` in hyperparams overrides it).
     return make_ppo(
@@ -188,7 +187,6 @@ def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
     :param total_timesteps: the transition budget.
     :return: ``[baselines.ppo.exact_budget_callback(total_timesteps)]``.
     """
-    from baselines.ppo import exact_budget_callback
 
     return [exact_budget_callback(total_timesteps)]
 

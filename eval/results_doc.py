@@ -35,7 +35,7 @@ from eval.claims import evaluate_claims, render_claims
 from eval.differences import claim_reason, find_differences, render_differences
 from eval.estimates import format_duration
 from eval.experiments import EXPERIMENTS, make_context
-from eval.jobs import Job, evaluation_env_kwargs, to_plain
+from eval.jobs import Job, to_plain
 from eval.parts import SCALES, Cell, Part
 from eval.provenance import (
     describe_machine,
@@ -46,6 +46,7 @@ from eval.provenance import (
     read_sessions,
 )
 from eval.records import default_docs, default_records, restore_records
+from eval.run import evaluation_env_kwargs
 
 MIN_SEEDS_FOR_IQM = 3
 

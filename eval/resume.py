@@ -25,16 +25,20 @@ Like ``load``, reading the checkpoint unpickles: it is meant for a run folder th
 from __future__ import annotations
 
 import json
+import pickle
 import shutil
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import cloudpickle
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from ebm_agent.checkpoint_files import atomic_path
 from eval.jobs import RESUME_FOLDER, STATE_FILE
+from eval.provenance import defaults_digest, job_fingerprint, read_json_dict
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -162,7 +166,6 @@ def write_run_state(job: Job, model: Any, callback: EvalCallback, learn_time_s: 
     :param resumed_at: transitions at which earlier processes resumed.
     :return: the ``state.json`` written.
     """
-    from eval.provenance import defaults_digest, job_fingerprint
 
     curve: dict[str, Any] = {key: list(getattr(callback, key)) for key in CURVE_KEYS}
     curve["best_mean_reward"] = float(callback.best_mean_reward)
@@ -186,9 +189,6 @@ def write_checkpoint_files(folder: Path, model: Any, payload: dict[str, Any], st
     :param state: JSON-able facts about the checkpoint (identity, times); the file names and the step are added.
     :return: the ``state.json`` written.
     """
-    import cloudpickle
-
-    from ebm_agent.checkpoint_files import atomic_path
 
     folder.mkdir(parents=True, exist_ok=True)
     steps = int(model.num_timesteps)
@@ -215,9 +215,6 @@ def read_checkpoint_files(folder: Path, identity: dict[str, Any]) -> tuple[dict[
     :param identity: entries that ``state.json`` must hold with these values (fingerprints, sizes).
     :return: ``(state, agent file, payload)``, or None.
     """
-    import pickle
-
-    from eval.provenance import read_json_dict
 
     state = read_json_dict(folder / STATE_FILE)
     if state is None:
@@ -244,7 +241,6 @@ def read_run_state(job: Job) -> RunState | None:
     :param job: the run.
     :return: the checkpoint, or None.
     """
-    from eval.provenance import defaults_digest, job_fingerprint
 
     identity = {"fingerprint": job_fingerprint(job), "defaults_digest": defaults_digest(job)}
     found = read_checkpoint_files(job.run_dir / RESUME_FOLDER, identity)

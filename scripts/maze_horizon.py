@@ -14,7 +14,7 @@ import argparse
 from dataclasses import replace
 
 from eval.experiments import build_parts, make_context, select_parts
-from eval.jobs import run_job
+from eval.run import run_job
 
 
 def main() -> None:

@@ -25,8 +25,9 @@ import numpy as np
 import yaml
 
 from eval.experiments import build_parts, make_context, select_parts
-from eval.jobs import Job, run_job
+from eval.jobs import Job
 from eval.provenance import completed_result
+from eval.run import run_job
 
 
 def parse_change(text: str) -> tuple[str, object]:

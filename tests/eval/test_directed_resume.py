@@ -8,7 +8,7 @@ import signal
 import numpy as np
 import pytest
 
-from eval.jobs import Job, run_job
+from eval.jobs import Job
 from eval.pretraining import (
     collect_directed_transitions,
     collection_checkpoint_dir,
@@ -16,6 +16,7 @@ from eval.pretraining import (
     load_or_build_dataset,
 )
 from eval.resume import STATE_FILE
+from eval.run import run_job
 from eval.stop import RunStopped
 
 pytest.importorskip("envs.particle")

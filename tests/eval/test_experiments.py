@@ -14,11 +14,12 @@ from eval.cli import main
 from eval.digest import class_defaults, env_inverse_dynamics_defaults, neutral_settings
 from eval.experiment_runner import figure_complete, run_parts, unique_jobs
 from eval.experiments import EXPERIMENTS, build_parts, make_context, select_parts
-from eval.jobs import Job, JobResult, run_job
+from eval.jobs import Job, JobResult
 from eval.parts import SCALES, Part
 from eval.pretraining import dataset_path, repeat_transitions
 from eval.provenance import completed_result, defaults_digest, job_fingerprint, read_provenance, read_sessions
 from eval.registry import AGENTS
+from eval.run import run_job
 
 pytest.importorskip("envs.particle")
 

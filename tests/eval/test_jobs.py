@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import yaml
 
-from eval.jobs import Job, JobResult, env_short_name, run_job
+from eval.jobs import Job, JobResult, env_short_name
 from eval.registry import AGENTS, AgentSpec, register_agent
+from eval.run import run_job
 
 pytest.importorskip("envs.particle")
 pytest.importorskip("baselines.random_agent")
@@ -123,7 +124,7 @@ def test_a_run_folder_held_by_a_live_process_is_left_alone_and_a_stale_lock_take
     import os
     import socket
 
-    from eval.jobs import RUN_LOCK
+    from eval.run import RUN_LOCK
 
     job = _job(tmp_path)
     job.run_dir.mkdir(parents=True)

@@ -13,9 +13,10 @@ from eval.cli import build_jobs, resolve_settings
 from eval.experiments import build_parts, make_context
 from eval.figures_common import FIGURE_AGENTS, figure_digest
 from eval.flags import build_parser
-from eval.jobs import Job, agent_settings
+from eval.jobs import Job
 from eval.pretraining import collector_settings
 from eval.provenance import agent_defaults_digest, defaults_digest, job_fingerprint
+from eval.run import agent_settings
 
 RECORDS = Path(__file__).resolve().parents[2] / "docs" / "records"
 

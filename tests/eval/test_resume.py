@@ -9,8 +9,9 @@ import zipfile
 import numpy as np
 import pytest
 
-from eval.jobs import Job, run_job
+from eval.jobs import Job
 from eval.resume import RESUME_FOLDER, STATE_FILE, read_run_state
+from eval.run import run_job
 
 pytest.importorskip("envs.particle")
 
