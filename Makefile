@@ -54,7 +54,7 @@ RESULTS_JOBS ?= 1
 results: $(STAMP)
 	$(VENV)/bin/ebm-eval --experiment all --scale paper -f $(RESULTS_DIR) --jobs $(RESULTS_JOBS) --no-progress; \
 	status=$$?; \
-	$(PY) -m eval.results_doc -f $(RESULTS_DIR) --docs docs/results.md && exit $$status
+	$(PY) -m eval.paper.results_doc -f $(RESULTS_DIR) --docs docs/results.md && exit $$status
 
 clean:
 	rm -rf $(VENV) build *.egg-info .pytest_cache .mypy_cache .ruff_cache

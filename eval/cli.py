@@ -7,7 +7,7 @@
 
 Settings come from three layers, the later winning: built-in defaults, the ``--config`` preset, explicit flags.
 
-The paper's experiments (``eval.experiments``) run by name, resumably, and regenerate docs/results.md:
+The paper's experiments (``eval.paper.experiments``) run by name, resumably, and regenerate docs/results.md:
 
     ebm-eval --experiment list                                   # experiments, parts, estimated cost
     ebm-eval --experiment table1 --part 'table1/particle/*' -f runs/results --jobs 2
@@ -35,8 +35,6 @@ import yaml
 from envs import ENV_IDS, PAPER_EVAL_KWARGS, resolve_env_id
 from eval.anchors import compute_anchors
 from eval.executors import executor_from_name
-from eval.experiment_runner import run_experiments, selected_parts
-from eval.experiments import EXPERIMENTS
 from eval.flags import (
     DEFAULTS,
     EXPERIMENT_ONLY,
@@ -47,10 +45,12 @@ from eval.flags import (
     build_parser,
 )
 from eval.jobs import Job, library_versions, to_plain
-from eval.parts import SCALES
+from eval.paper.experiments import EXPERIMENTS
+from eval.paper.parts import SCALES
+from eval.paper.records import default_docs, default_records
+from eval.paper.runner import run_experiments, selected_parts
 from eval.plots import plot_learning_curves  # matplotlib and scipy load only for a real sweep
 from eval.presets import load_preset
-from eval.records import default_docs, default_records
 from eval.registry import AGENTS
 from eval.report import write_csv, write_markdown
 

@@ -13,18 +13,16 @@ import multiprocessing
 import os
 import signal
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import Future, ProcessPoolExecutor, as_completed
 from typing import Any, Protocol, runtime_checkable
 
 import torch
 from tqdm.auto import tqdm
 
-from eval.jobs import Job, JobResult
+from eval.jobs import Job, JobResult, Runner
 from eval.run import run_job
 from eval.stop import install_worker_handlers, stop_at_next_step, stop_received
-
-Runner = Callable[[Job], JobResult]
 
 
 @runtime_checkable
@@ -88,7 +86,7 @@ class LocalExecutor:
         """Give this process ``threads_per_job`` torch threads (nothing when it is None).
 
         For the work that runs in this process: the runs of ``jobs=1``, and the figure parts of ``ebm-eval
-        --experiment`` (``eval.experiment_runner.run_parts``), which would otherwise take every core beside other
+        --experiment`` (``eval.paper.runner.run_parts``), which would otherwise take every core beside other
         processes that were told to share them.
         """
         if self.threads_per_job is not None:

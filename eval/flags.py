@@ -249,7 +249,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     experiments = parser.add_argument_group(
         "paper experiments",
-        "run the paper's tables and figures by name (eval/experiments.py), resumably, and write "
+        "run the paper's tables and figures by name (eval/paper/experiments.py), resumably, and write "
         "docs/results.md; the sweep flags above (--env, --timesteps, ...) do not apply",
     )
     experiments.add_argument(

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import json
 import platform
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -221,6 +222,10 @@ def library_versions() -> dict[str, str]:
     return versions
 
 
+Runner = Callable[[Job], JobResult]
+"""What an executor calls on each job (``eval.run.run_job``, or a stand-in in tests)."""
+
+
 __all__ = [
     "DATASETS",
     "EVAL_SEED_OFFSET",
@@ -230,6 +235,7 @@ __all__ = [
     "STATE_FILE",
     "Job",
     "JobResult",
+    "Runner",
     "env_short_name",
     "library_versions",
     "to_plain",

@@ -31,8 +31,7 @@ import ray
 import yaml
 from tqdm.auto import tqdm
 
-from eval.executors import Runner
-from eval.jobs import Job, JobResult
+from eval.jobs import Job, JobResult, Runner
 from eval.run import run_job
 
 RunFiles = dict[str, bytes]

@@ -22,7 +22,7 @@ import torch
 
 import envs  # noqa: F401  (registers ebm/Particle-v0)
 from baselines.action_ff import ActionFFAgent
-from eval.figures_common import run_episode
+from eval.paper.figures.common import run_episode
 
 START, GOAL = (0.0, 0.0), (0.5, 0.5)
 """The paper's particle start and goal (DESIGN.md)."""
@@ -55,7 +55,7 @@ def plan_spread(agent: ActionFFAgent, state: np.ndarray, goal: np.ndarray, plans
 
 
 def episode(agent: ActionFFAgent, steps: int) -> dict[str, float]:
-    """One deterministic episode from the paper's start to its goal (``eval.figures_common.run_episode``).
+    """One deterministic episode from the paper's start to its goal (``eval.paper.figures.common.run_episode``).
 
     :param agent: a particle Action FF.
     :param steps: the episode's step limit.

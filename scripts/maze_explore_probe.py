@@ -21,9 +21,9 @@ import torch
 import yaml
 
 import envs  # noqa: F401  (registers ebm/Maze-v0)
-from eval.figures_callbacks import VisitedStatesCallback, grid_coverage, linear_checkpoints
-from eval.figures_common import budget_for, build_ebm
-from eval.figures_exploration import MAZE_BINS, NO_GOAL
+from eval.paper.figures.callbacks import VisitedStatesCallback, grid_coverage, linear_checkpoints
+from eval.paper.figures.common import budget_for, build_ebm
+from eval.paper.figures.exploration import MAZE_BINS, NO_GOAL
 
 
 def main(argv: list[str] | None = None) -> list[tuple[int, float]]:

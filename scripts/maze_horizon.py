@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from eval.experiments import build_parts, make_context, select_parts
+from eval.paper.experiments import build_parts, make_context, select_parts
 from eval.run import run_job
 
 

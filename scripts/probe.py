@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from eval.experiments import build_parts, make_context, select_parts
 from eval.jobs import Job
+from eval.paper.experiments import build_parts, make_context, select_parts
 from eval.provenance import completed_result
 from eval.run import run_job
 

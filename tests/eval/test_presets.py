@@ -10,10 +10,10 @@ import pytest
 
 from ebm_agent.presets import PAPER_EBM
 from eval.cli import build_jobs, resolve_settings
-from eval.experiments import build_parts, make_context
-from eval.figures_common import FIGURE_AGENTS, figure_digest
 from eval.flags import build_parser
 from eval.jobs import Job
+from eval.paper.experiments import build_parts, make_context
+from eval.paper.figures.common import FIGURE_AGENTS, figure_digest
 from eval.pretraining import collector_settings
 from eval.provenance import agent_defaults_digest, defaults_digest, job_fingerprint
 from eval.run import agent_settings
@@ -96,7 +96,7 @@ def test_cli_preset_flag(tmp_path: Path) -> None:
 
 
 def test_no_loss_comparison_reads_the_reference_interval() -> None:
-    from eval.claims import FAILS, HOLDS, MISSING, NO_LOSS_CLAIMS, compare_no_loss
+    from eval.paper.claims import FAILS, HOLDS, MISSING, NO_LOSS_CLAIMS, compare_no_loss
 
     paper = [-10.0, -10.5, -9.5]
     assert compare_no_loss("env", "new", [-10.2, -9.9, -10.1], "paper", paper).verdict == HOLDS

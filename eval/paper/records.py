@@ -17,8 +17,8 @@ so that ``ebm-eval --experiment`` skips what has been run before (the fingerprin
 for any run) and the document reports every recorded number. Runs moved aside (``*.replaced-*``) and unfinished
 runs are never recorded. Every file is written atomically.
 
-    python -m eval.records save -f runs/results             # after a run: into docs/records
-    python -m eval.records restore -f runs/results          # on a new machine: before a run or a report
+    python -m eval.paper.records save -f runs/results             # after a run: into docs/records
+    python -m eval.paper.records restore -f runs/results          # on a new machine: before a run or a report
 """
 
 from __future__ import annotations
@@ -33,12 +33,13 @@ from pathlib import Path
 
 from ebm_agent.checkpoint_files import atomic_path
 from eval.provenance import SESSIONS_FILE, read_metrics
+from eval.run import run_in_progress
 
 FIGURE_STARTED = "figure_started.json"
-"""Written into a figure's folder when it starts (``eval.experiment_runner``): its part, scale and seeds."""
+"""Written into a figure's folder when it starts (``eval.paper.runner``): its part, scale and seeds."""
 
 SEED_FOLDER = "seeds"
-"""Sub-folder of a figure's folder holding its finished seeds (``eval.figures_common.seed_result``)."""
+"""Sub-folder of a figure's folder holding its finished seeds (``eval.paper.figures.common.seed_result``)."""
 
 RECORDS_DIR = "docs/records"
 """The records of the published document (``docs/results.md``)."""
@@ -279,7 +280,6 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
     summary = RecordsSummary()
     if not records_dir.is_dir():
         return summary
-    from eval.run import run_in_progress
 
     for relative in finished_runs(records_dir):
         target = out_dir / relative
@@ -309,13 +309,13 @@ def restore_records(records_dir: Path, out_dir: Path) -> RecordsSummary:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m eval.records save|restore``.
+    """``python -m eval.paper.records save|restore``.
 
     :param argv: the arguments.
     :return: 0.
     """
     parser = argparse.ArgumentParser(
-        prog="python -m eval.records",
+        prog="python -m eval.paper.records",
         description="Keep the small files of finished runs and figures in the repository (save), or bring them back "
         "into a results folder (restore).",
     )

@@ -15,7 +15,7 @@ evaluation; exploration figures by part) and ``evaluate_claims`` reads them thro
   With at least 3 seeds in each of the four cells it holds when the two changes' 95% bootstrap intervals separate
   (``eval.stats.bootstrap_difference_ci``, each cell's seeds resampled on their own) and is "inconclusive" when
   they overlap; with fewer seeds the means decide and the evidence says so.
-- The exploration claim reads the exploration figures' metrics (``eval.figures``) at equal transitions: maze
+- The exploration claim reads the exploration figures' metrics (``eval.paper.figures``) at equal transitions: maze
   coverage of the EBM vs the random agent after the same budget, Sawyer finger occupancy of the EBM at its budget
   vs each random explorer's occupancy at that same budget, against the strongest random explorer (highest mean).
   Keys are slash-joined paths into the nested metrics (``agents/ebm/coverage/mean``). Where both numbers have
@@ -48,7 +48,7 @@ FAILS = "does not hold"
 MISSING = "not measured"
 
 CellKey = tuple[str, str, str]
-"""(part name, agent, setting): one table cell (``eval.parts.Cell``)."""
+"""(part name, agent, setting): one table cell (``eval.paper.parts.Cell``)."""
 
 ScoreLookup = Callable[[CellKey], Sequence[float]]
 """Per-seed scores of a cell; empty when it has not run."""
@@ -316,7 +316,7 @@ def compare_scores(
     :param scores: its per-seed scores [seeds] (empty: not run).
     :param other_name: the second side's name.
     :param other: its per-seed scores.
-    :param retired: each side's runs made with earlier library defaults (``eval.results_doc.CellResult.retired``):
+    :param retired: each side's runs made with earlier library defaults (``eval.paper.results_doc.CellResult.retired``):
         a side with none of today's runs but some of those reads "rerun pending", as its table cell does.
     :return: the comparison.
     """
@@ -613,7 +613,7 @@ def render_claims(claims: Sequence[Claim], reason: Callable[[str, str], str | No
 
     :param claims: from ``evaluate_claims``.
     :param reason: ``(claim text, comparison label) -> what we know of why it does not hold`` (or None); asked only
-        for comparisons that do not hold or are inconclusive (``eval.differences.claim_reason``).
+        for comparisons that do not hold or are inconclusive (``eval.paper.differences.claim_reason``).
     :return: markdown.
     """
     lines = []

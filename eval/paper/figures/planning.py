@@ -30,7 +30,7 @@ from ebm_agent import EBMPlannerAgent, GaussianGoalEnergy, MPPIConfig, MPPIPlann
 from ebm_agent.agent import GOAL_ENERGIES
 from ebm_agent.costs import AccelerationPrior, GoalEnergy
 from envs.reacher import fingertip_position, wrap_difference, wrapped_l1_distance
-from eval.figures_common import (
+from eval.paper.figures.common import (
     FigureResult,
     budget_for,
     check_seeds,

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from eval.estimates import (
+from eval.paper.estimates import (
     MeasuredCost,
     estimate_collection_seconds,
     estimate_job_seconds,
@@ -16,7 +16,7 @@ from eval.estimates import (
     format_duration,
     measured_part_cost,
 )
-from eval.experiments import build_parts, describe_experiments, make_context
+from eval.paper.experiments import build_parts, describe_experiments, make_context
 
 
 def _part(out: Path, name: str):
@@ -52,7 +52,7 @@ def test_a_figure_is_measured_by_the_wall_time_of_its_command(tmp_path):
 
 
 def test_runs_and_figures_made_under_earlier_defaults_are_measured_and_named_to_rerun(tmp_path):
-    from eval.figures_common import figure_digest
+    from eval.paper.figures.common import figure_digest
     from eval.provenance import defaults_digest, job_fingerprint
 
     part = _part(tmp_path, "table2/sawyer/pretrained_directed")

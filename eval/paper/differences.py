@@ -16,8 +16,8 @@ from fnmatch import fnmatchcase
 import numpy as np
 
 from eval import stats
-from eval.claims import EXPLORATION_CLAIM, LEARNING_CONTROL, SCORE_CLAIMS
-from eval.parts import Cell
+from eval.paper.claims import EXPLORATION_CLAIM, LEARNING_CONTROL, SCORE_CLAIMS
+from eval.paper.parts import Cell
 
 MIN_SEEDS = 3
 
@@ -225,9 +225,9 @@ def explain(part: str, agent: str, setting: str = "") -> str:
 
 @dataclass(frozen=True)
 class ClaimReason:
-    """What we know of why one comparison of a claim (``eval.claims``) does not hold or is inconclusive.
+    """What we know of why one comparison of a claim (``eval.paper.claims``) does not hold or is inconclusive.
 
-    :param claim: the claim's text (``eval.claims.SCORE_CLAIMS``, ``EXPLORATION_CLAIM``, ``LEARNING_CONTROL``).
+    :param claim: the claim's text (``eval.paper.claims.SCORE_CLAIMS``, ``EXPLORATION_CLAIM``, ``LEARNING_CONTROL``).
     :param label: the comparison's label (an env).
     :param text: the reason, with its evidence named, and no measured numbers; shown only while the comparison does
         not hold (a verdict is never written down).
@@ -284,7 +284,7 @@ CLAIM_REASONS: tuple[ClaimReason, ...] = (
 
 
 def claim_reason(claim: str, label: str) -> str | None:
-    """The reason of a claim's comparison that does not hold (``eval.claims.render_claims``).
+    """The reason of a claim's comparison that does not hold (``eval.paper.claims.render_claims``).
 
     :param claim: the claim's text.
     :param label: the comparison's label.
@@ -326,7 +326,7 @@ def render_differences(differences: Sequence[Difference]) -> list[str]:
         "## Where we differ from the paper, and why",
         "",
         f"A cell differs when it has at least {MIN_SEEDS} seeds and the paper's number lies outside the 95% interval "
-        "of our mean (computed); the reasons are written in `eval/differences.py`.",
+        "of our mean (computed); the reasons are written in `eval/paper/differences.py`.",
         "",
     ]
     if not differences:

@@ -2,7 +2,7 @@
 
 An online EBM is trained on the particle (the registered env: random starts, goal (0.5, 0.5)) and on the maze
 without a goal (the exploration setting of the paper's figure). At evenly spaced points of training,
-:class:`~eval.figures_callbacks.EnergyMapCallback` records the energy of a small diagonal move centred at every
+:class:`~eval.paper.figures.callbacks.EnergyMapCallback` records the energy of a small diagonal move centred at every
 point of a grid (the original's ``--energy_heatmap``: E(c - 0.01, c + 0.01)) and the visits so far.
 
 The paper's claim is that energies stay put where the agent has been and keep changing where it has not, which
@@ -26,8 +26,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from envs.maze import maze_valid
-from eval.figures_callbacks import EnergyMapCallback, EnergySnapshot, linear_checkpoints
-from eval.figures_common import (
+from eval.paper.figures.callbacks import EnergyMapCallback, EnergySnapshot, linear_checkpoints
+from eval.paper.figures.common import (
     FigureBudget,
     FigureResult,
     budget_for,
@@ -42,8 +42,8 @@ from eval.figures_common import (
     summary,
     to_jsonable,
 )
-from eval.figures_exploration import MAZE_BINS, NO_GOAL, free_cells
-from eval.records import SEED_FOLDER
+from eval.paper.figures.exploration import MAZE_BINS, NO_GOAL, free_cells
+from eval.paper.records import SEED_FOLDER
 
 ENERGY_ENVS: dict[str, tuple[str, dict[str, float] | None]] = {
     "particle": ("ebm/Particle-v0", None),

@@ -36,7 +36,7 @@ from ebm_agent import BoxObstacleEnergy
 from ebm_agent.presets import PAPER_ACTION_FF, merge_settings
 from envs.particle import ParticleEnv
 from eval.anchors import compute_anchors
-from eval.figures_common import (
+from eval.paper.figures.common import (
     PAPER_SCORES,
     FigureResult,
     budget_for,

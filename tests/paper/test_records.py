@@ -8,12 +8,12 @@ from pathlib import Path
 import numpy as np
 
 from eval.cli import main as ebm_eval
-from eval.experiment_runner import plan_jobs
-from eval.experiments import build_parts, make_context
 from eval.jobs import Job
+from eval.paper.experiments import build_parts, make_context
+from eval.paper.records import default_docs, default_records, finished_runs, main, restore_records, save_records
+from eval.paper.results_doc import collect_cell
+from eval.paper.runner import plan_jobs
 from eval.provenance import append_session, job_fingerprint, write_provenance
-from eval.records import default_docs, default_records, finished_runs, main, restore_records, save_records
-from eval.results_doc import collect_cell
 
 
 def finish(job: Job, score: float) -> None:
@@ -177,7 +177,7 @@ def test_the_anchors_the_report_computed_are_recorded(tmp_path):
 
 
 def test_the_finished_seeds_of_an_unfinished_figure_are_recorded_and_restored_on_a_new_machine(tmp_path):
-    from eval.records import FIGURE_STARTED, SEED_FOLDER, restore_records, save_records
+    from eval.paper.records import FIGURE_STARTED, SEED_FOLDER, restore_records, save_records
 
     figure = Path("figures/obstacle_generalisation")
     started = json.dumps({"part": "obstacle/particle", "scale": "paper", "seeds": [0, 1, 2]})
@@ -198,7 +198,7 @@ def test_the_finished_seeds_of_an_unfinished_figure_are_recorded_and_restored_on
 
 
 def test_a_started_figure_without_a_finished_seed_is_not_recorded(tmp_path):
-    from eval.records import FIGURE_STARTED, save_records
+    from eval.paper.records import FIGURE_STARTED, save_records
 
     (tmp_path / "out" / "figures" / "energy_maps").mkdir(parents=True)
     (tmp_path / "out" / "figures" / "energy_maps" / FIGURE_STARTED).write_text("{}")
@@ -208,15 +208,14 @@ def test_a_started_figure_without_a_finished_seed_is_not_recorded(tmp_path):
 
 def test_a_run_with_seeds_still_publishes_the_protocol_seeds(tmp_path, monkeypatch):
     """``--seeds 0`` splits the work; the published document (with records) keeps reporting every seed."""
-    import eval.results_doc as results_doc
+    import eval.paper.runner as runner
     from eval.executors import LocalExecutor
-    from eval.experiment_runner import run_experiments
 
     written = []
-    monkeypatch.setattr(results_doc, "write_results", lambda out, docs, scale, seeds, records=None: written.append(seeds))
+    monkeypatch.setattr(runner, "write_results", lambda out, docs, scale, seeds, records=None: written.append(seeds))
     base = {"experiments": ["table1"], "out": str(tmp_path / "runs"), "docs": str(tmp_path / "results.md")}
     base.update(scale="paper", seeds=[0], device="cpu")
     for records, report_only in ((str(tmp_path / "records"), False), (str(tmp_path / "records"), True), (None, False)):
         settings = {**base, "records": records, "report_only": report_only}
-        assert run_experiments(settings, [], LocalExecutor(), "ebm-eval", progress=False) == 0
+        assert runner.run_experiments(settings, [], LocalExecutor(), "ebm-eval", progress=False) == 0
     assert written == [None, [0], [0]]

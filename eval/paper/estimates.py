@@ -14,8 +14,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
+
 from eval.jobs import Job
-from eval.parts import Part
+from eval.paper.figures.common import figure_digest, recorded_figure_digests
+from eval.paper.parts import Part
+from eval.pretraining import dataset_path
+from eval.provenance import is_current_run, job_fingerprint
 
 SECONDS_PER_STEP = {"particle": 0.02, "maze": 0.02, "reacher": 0.037, "sawyer": 0.053}
 """Rough CPU seconds per env step of a planning agent (EBM, Action FF), learning or acting, in one of two processes
@@ -67,7 +72,6 @@ particle transitions each with evaluations in and out of the box, from its seeds
 
 
 def _episode_length(job: Job) -> int:
-    import gymnasium as gym
 
     steps = job.env_kwargs.get("max_episode_steps")
     if steps is None:
@@ -121,7 +125,6 @@ def estimate_jobs_seconds(jobs: Iterable[Job]) -> float:
     :param jobs: the jobs (a run listed twice is counted twice: deduplicate by ``run_dir`` first).
     :return: seconds.
     """
-    from eval.pretraining import dataset_path
 
     total = 0.0
     collections: dict[Path, float] = {}  # one per env, size, seed and collector: its cache file
@@ -167,7 +170,7 @@ class MeasuredCost:
     :param total: runs (or figures) of the part.
     :param unit: what was counted, ``runs`` or ``figure``.
     :param retired: of the finished ones, those made under earlier library defaults (``eval.provenance.is_current_run``,
-        ``eval.experiment_runner.figure_state``): their time is measured, but ``ebm-eval --experiment`` makes them
+        ``eval.paper.runner.figure_state``): their time is measured, but ``ebm-eval --experiment`` makes them
         again.
     """
 
@@ -195,9 +198,6 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
     :param folders: results or records folders, searched in order.
     :return: the measured cost, or None when nothing of the part has finished.
     """
-    from eval.experiment_runner import recorded_figure_digests
-    from eval.figures_common import figure_digest
-    from eval.provenance import is_current_run, job_fingerprint
 
     out_dir = Path(part.out_dir)
     if part.figure is not None:
@@ -218,7 +218,7 @@ def measured_part_cost(part: Part, folders: Sequence[Path | str]) -> MeasuredCos
             seconds, metrics, _path = found
             total += seconds
             finished += 1
-            # the same job (fingerprint) made under other defaults, as eval.results_doc counts a rerun pending
+            # the same job (fingerprint) made under other defaults, as eval.paper.results_doc counts a rerun pending
             retired += int(metrics.get("fingerprint") == job_fingerprint(job) and not is_current_run(job, metrics))
     return MeasuredCost(total, finished, len(jobs), retired=retired) if finished else None
 

@@ -13,8 +13,8 @@ from stable_baselines3.common.env_util import make_vec_env
 
 import envs  # noqa: F401
 from baselines.random_agent import RandomAgent, count_occupied_cells
-from eval.figures import FIGURES, FigureResult, budget_for, obstacle_optimum
-from eval.figures_callbacks import (
+from eval.paper.figures import FIGURES, FigureResult, budget_for, obstacle_optimum
+from eval.paper.figures.callbacks import (
     VOXEL_CORNERS,
     EnergyMapCallback,
     VisitedStatesCallback,
@@ -22,7 +22,7 @@ from eval.figures_callbacks import (
     grid_coverage,
     original_voxel_occupancy,
 )
-from eval.figures_common import build_ebm
+from eval.paper.figures.common import build_ebm
 
 SMOKE = budget_for("smoke")
 
@@ -209,7 +209,7 @@ def test_figure_result_stores_png_paths_relative_to_its_folder_and_plain_json_nu
 
 
 def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_path, capsys):
-    from eval.figures_common import SEED_FOLDER, seed_result
+    from eval.paper.figures.common import SEED_FOLDER, seed_result
 
     calls = []
 
@@ -230,7 +230,7 @@ def test_a_finished_seed_is_kept_and_read_back_instead_of_computed_again(tmp_pat
 
 
 def test_an_obstacle_figure_cut_short_resumes_with_the_seeds_it_finished(tmp_path, monkeypatch):
-    import eval.figures_obstacle as obstacle
+    import eval.paper.figures.obstacle as obstacle
 
     full = obstacle.obstacle_generalisation(tmp_path / "full", seeds=[0, 1], scale="smoke")
     real_build, built = obstacle.build_ebm, []
@@ -256,7 +256,7 @@ def test_an_obstacle_figure_cut_short_resumes_with_the_seeds_it_finished(tmp_pat
 
 
 def test_a_rerun_of_the_sawyer_exploration_reads_its_finished_seeds_back(tmp_path, monkeypatch):
-    import eval.figures_exploration as exploration
+    import eval.paper.figures.exploration as exploration
 
     first = exploration.sawyer_exploration(tmp_path, seeds=[0], scale="smoke")
 
@@ -269,7 +269,7 @@ def test_a_rerun_of_the_sawyer_exploration_reads_its_finished_seeds_back(tmp_pat
 
 
 def test_energy_maps_cut_short_resume_with_the_runs_they_finished(tmp_path, monkeypatch):
-    import eval.figures_energy as energy
+    import eval.paper.figures.energy as energy
 
     full = energy.energy_maps(tmp_path / "full", seeds=[0, 1], scale="smoke")
     real_build, built = energy.build_ebm, []

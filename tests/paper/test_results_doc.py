@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from eval.claims import (
+from eval.jobs import Job
+from eval.paper.claims import (
     EXPLORATION_FIGURES,
     FAILS,
     HOLDS,
@@ -24,11 +25,10 @@ from eval.claims import (
     exploration_pair,
     per_seed_values,
 )
-from eval.experiments import build_parts, make_context
-from eval.jobs import Job
-from eval.parts import Part
+from eval.paper.experiments import build_parts, make_context
+from eval.paper.parts import Part
+from eval.paper.results_doc import collect_cell, main, render_results, write_results
 from eval.provenance import append_session, job_fingerprint, write_provenance
-from eval.results_doc import collect_cell, main, render_results, write_results
 
 MACHINE = {"cpu": "Test CPU", "cores": 2, "torch_threads": 1, "gpu": None, "device": "cpu"}
 
@@ -117,7 +117,7 @@ def test_runs_of_another_configuration_or_unfinished_ones_do_not_count(tmp_path)
 
 
 def test_runs_made_with_earlier_library_defaults_are_reported_as_rerun_pending(tmp_path):
-    from eval.results_doc import cells_table
+    from eval.paper.results_doc import cells_table
 
     part = parts_of(tmp_path, "table1")["table1/maze/pretrained"]
     jobs = cell(part, "action-ff").jobs
@@ -259,7 +259,7 @@ def _sawyer_pretrained(ebm_directed, ebm_sequential, ff_directed, ff_sequential,
     ],
 )
 def test_the_sequential_ablation_compares_the_two_agents_drops(ff_sequential, verdict):
-    from eval.claims import CHANGE_CLAIMS, DIRECTED_CLAIMS
+    from eval.paper.claims import CHANGE_CLAIMS, DIRECTED_CLAIMS
 
     scores = _sawyer_pretrained([-270.0, -262.0, -280.0], [-258.0, -257.0, -259.0], [-617.0, -600.0, -620.0], ff_sequential)
     claims = {c.text: c for c in evaluate_claims(scores, lambda part: None)}
@@ -275,7 +275,7 @@ def test_the_sequential_ablation_compares_the_two_agents_drops(ff_sequential, ve
 
 
 def test_the_sequential_ablation_waits_for_its_four_cells_and_decides_by_means_below_three_seeds():
-    from eval.claims import CHANGE_CLAIMS
+    from eval.paper.claims import CHANGE_CLAIMS
 
     scores = _sawyer_pretrained([-270.0, -262.0], [-258.0], [-617.0], [])
     change = {c.text: c for c in evaluate_claims(scores, lambda part: None)}[CHANGE_CLAIMS[0].text]
@@ -380,7 +380,7 @@ def test_a_figure_made_under_earlier_defaults_is_reported_as_rerun_pending(tmp_p
     assert "| old |" not in text
     assert "Seeds already made" not in text  # none kept yet
 
-    from eval.figures_common import figure_digest
+    from eval.paper.figures.common import figure_digest
 
     (folder / "seeds").mkdir()
     current = figure_digest("obstacle_generalisation")
@@ -404,8 +404,8 @@ def test_a_claim_names_the_runs_that_wait_for_a_rerun(results):
 
 
 def test_a_comparison_that_does_not_hold_carries_its_reason_and_one_that_holds_none():
-    from eval.claims import SCORE_CLAIMS, render_claims
-    from eval.differences import CLAIM_REASONS, claim_reason
+    from eval.paper.claims import SCORE_CLAIMS, render_claims
+    from eval.paper.differences import CLAIM_REASONS, claim_reason
 
     def lookup(ebm: float):
         def scores(key):

@@ -1,8 +1,8 @@
 """The units of the reproduction: scales (budgets), cells (one table number over seeds), parts (what runs, resumes
 and is reported on its own) and experiments, with a rough cost estimate of each part.
 
-``eval.experiments`` builds the paper's experiments from these; ``eval.experiment_runner`` runs parts and
-``eval.results_doc`` reports them.
+``eval.paper.experiments`` builds the paper's experiments from these; ``eval.paper.runner`` runs parts and
+``eval.paper.results_doc`` reports them.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from typing import Any
 
 from envs import ENV_IDS, PAPER_EVAL_KWARGS
 from eval.jobs import Job
+from eval.presets import PRESET_DIR, load_preset
 
 AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
 """How agents are named in tables."""
@@ -130,7 +131,7 @@ class Part:
     :param out_dir: the results folder.
     :param seeds: its training seeds.
     :param cells: the table cells (empty for a figure part).
-    :param figure: the ``eval.figures`` function it calls, None for a table part.
+    :param figure: the ``eval.paper.figures`` function it calls, None for a table part.
     :param paper: a figure part's paper numbers, label -> number.
     """
 
@@ -224,7 +225,6 @@ def preset_hyperparams(env: str) -> dict[str, dict[str, Any]]:
     :param env: env short name.
     :return: agent name -> keyword arguments.
     """
-    from eval.presets import PRESET_DIR, load_preset
 
     path = PRESET_DIR / f"{env}_online.yaml"
     return dict(load_preset(str(path)).get("hyperparams") or {}) if path.is_file() else {}
@@ -316,7 +316,7 @@ def table_part(context: Context, experiment: str, name: str, cells: Sequence[Cel
 
 
 def figure_part(context: Context, experiment: str, name: str, figure: str, paper: dict[str, float] | None = None) -> Part:
-    """A part that calls one ``eval.figures`` function."""
+    """A part that calls one ``eval.paper.figures`` function."""
     seeds = context.seeds_for(figure)
     return Part(name, experiment, context.scale.name, context.out_dir, seeds, figure=figure, paper=dict(paper or {}))
 

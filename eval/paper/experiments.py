@@ -7,7 +7,7 @@
 
 An :class:`Experiment` builds its :class:`Part` s for a :class:`Scale` (``paper``: the paper's budgets;
 ``smoke``: tiny ones for tests). A part is either a list of :class:`Cell` s (one number of a table each: the runs
-of one configuration over seeds, with the paper's number beside it) or one figure of ``eval.figures``. Every run
+of one configuration over seeds, with the paper's number beside it) or one figure of ``eval.paper.figures``. Every run
 folder is named by its configuration (``<out>/<variant>/<env>/<agent>/seed_<k>``), so experiments that need the
 same runs share them (Table 2's online fixed-goal runs are also the ground-truth row of the inverse-dynamics
 ablation and the runs the fixed-goal-on-variable-goals evaluation reads).
@@ -26,9 +26,9 @@ from dataclasses import replace
 from fnmatch import fnmatchcase
 from pathlib import Path
 
-from eval.estimates import estimate_jobs_seconds, estimate_part_seconds, format_duration, measured_part_cost
-from eval.jobs import Job
-from eval.parts import (
+from eval.jobs import RESUME_FOLDER, STATE_FILE, Job
+from eval.paper.estimates import estimate_jobs_seconds, estimate_part_seconds, format_duration, measured_part_cost
+from eval.paper.parts import (
     FAST_PART_SUFFIX,
     FAST_VARIANT_SUFFIX,
     SCALES,
@@ -40,6 +40,8 @@ from eval.parts import (
     make_cell,
     table_part,
 )
+from eval.pretraining import collection_checkpoint_dir
+from eval.provenance import read_json_dict
 
 PPO_MULTIPLES = (1, 5, 10)
 """PPO's Sawyer budgets as multiples of the online budget (paper Sec. 4.2: -9300 at 1x, comparable to the EBM at
@@ -389,9 +391,6 @@ def describe_experiments(context: Context, measured_from: Sequence[str | Path] =
 def _in_progress(part: Part) -> str:
     """``; resumes <run> at t/T, ...`` for the part's unfinished runs that kept a checkpoint (``eval.resume``) and
     the unfinished directed collections its pretrained runs wait for (``eval.pretraining``)."""
-    from eval.jobs import RESUME_FOLDER, STATE_FILE
-    from eval.pretraining import collection_checkpoint_dir
-    from eval.provenance import read_json_dict
 
     found: list[str] = []
     collections: dict[Path, str] = {}  # the EBM and Action FF runs of a seed share one collection

@@ -1,17 +1,17 @@
 """``docs/results.md`` from a results folder: every experiment's numbers beside the paper's, or "not run yet".
 
-    python -m eval.results_doc -f runs/results              # docs/results.md
+    python -m eval.paper.results_doc -f runs/results              # docs/results.md
     ebm-eval --report-only -f runs/results                  # the same
 
-The document is built from the registry (``eval.experiments``) and the run folders only: a cell's number is
+The document is built from the registry (``eval.paper.experiments``) and the run folders only: a cell's number is
 read from the ``metrics.json`` of runs whose fingerprint matches the cell's configuration (seeds found on disk
 beyond the default ones are included), a figure from its ``figure.json``. A part without runs says "not run
 yet" with the command that runs it; nothing is ever filled in. Per table: mean ± std over seeds of the per-seed
 mean scores (10 deterministic episodes each at the paper's scale), the IQM with its 95% stratified-bootstrap
 interval from 3 seeds on (``eval.stats``), the paper's number, the anchors of the evaluation env
 (``eval.anchors``), and per part the command that produced it, the machine, the date and the wall time. Claims
-are judged from the numbers (``eval.claims``), and the cells whose interval excludes the paper's number are listed with
-the reason we know (``eval.differences``). Figures are copied to ``<docs>/figures/`` and linked.
+are judged from the numbers (``eval.paper.claims``), and the cells whose interval excludes the paper's number are listed with
+the reason we know (``eval.paper.differences``). Figures are copied to ``<docs>/figures/`` and linked.
 """
 
 from __future__ import annotations
@@ -31,12 +31,15 @@ import numpy as np
 
 from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
-from eval.claims import evaluate_claims, render_claims
-from eval.differences import claim_reason, find_differences, render_differences
-from eval.estimates import format_duration
-from eval.experiments import EXPERIMENTS, make_context
 from eval.jobs import Job, to_plain
-from eval.parts import SCALES, Cell, Part
+from eval.paper.claims import evaluate_claims, render_claims
+from eval.paper.differences import claim_reason, find_differences, render_differences
+from eval.paper.estimates import format_duration
+from eval.paper.experiments import EXPERIMENTS, make_context
+from eval.paper.figures.common import figure_complete, figure_seeds_kept, figure_state
+from eval.paper.parts import SCALES, Cell, Part
+from eval.paper.records import default_docs, default_records, restore_records
+from eval.plots import load_curve, plot_curves
 from eval.provenance import (
     describe_machine,
     is_current_run,
@@ -45,7 +48,6 @@ from eval.provenance import (
     read_provenance,
     read_sessions,
 )
-from eval.records import default_docs, default_records, restore_records
 from eval.run import evaluation_env_kwargs
 
 MIN_SEEDS_FOR_IQM = 3
@@ -190,8 +192,6 @@ def part_status(part: Part, results: Sequence[CellResult]) -> PartStatus:
     """
     status = PartStatus()
     if part.figure is not None:
-        from eval.experiment_runner import figure_complete
-
         record = read_provenance(part.figure_dir) or {}
         status.total, status.done = 1, int(figure_complete(part))
         if status.done:
@@ -300,7 +300,6 @@ def learning_curves(part: Part, results: Sequence[CellResult], figures_dir: Path
     :param figures_dir: where the PNG goes.
     :return: the PNG, or None.
     """
-    from eval.plots import load_curve, plot_curves
 
     curves: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
     for result in results:
@@ -331,7 +330,6 @@ def figure_section(part: Part, figures_dir: Path, docs_dir: Path) -> list[str]:
     :param docs_dir: the document's folder (links are relative to it).
     :return: markdown lines.
     """
-    from eval.experiment_runner import figure_seeds_kept, figure_state
 
     lines = []
     if part.paper:
@@ -509,13 +507,13 @@ def write_results(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m eval.results_doc``: regenerate the results document.
+    """``python -m eval.paper.results_doc``: regenerate the results document.
 
     :param argv: the arguments.
     :return: 0.
     """
     parser = argparse.ArgumentParser(
-        prog="python -m eval.results_doc",
+        prog="python -m eval.paper.results_doc",
         description="Regenerate the results document (docs/results.md) from a results folder; nothing is trained.",
     )
     parser.add_argument("-f", "--out", default="runs/results", help="the results folder (default: runs/results)")

@@ -6,13 +6,13 @@
   ``seed_<k>.replaced-<fingerprint>`` (never deleted) before the new one runs.
 - Jobs of all selected parts run through one executor (``--jobs N`` processes, or Ray); runs shared by several
   parts (Table 2's online fixed-goal runs) run once.
-- Figure parts call their ``eval.figures`` function in this process (with the local executor's ``--threads``); a
+- Figure parts call their ``eval.paper.figures`` function in this process (with the local executor's ``--threads``); a
   figure folder with a ``figure.json`` made at the same scale and seeds is complete. An unfinished figure of the same
   part, scale and seeds (its ``figure_started.json``) is resumed: the seeds it finished (``<folder>/seeds/``,
-  ``eval.figures_common.seed_result``) are kept, so a figure longer than one session finishes over several.
+  ``eval.paper.figures.common.seed_result``) are kept, so a figure longer than one session finishes over several.
 - Every run and figure folder gets a ``provenance.json`` (command, part, date), and ``<out>/sessions.jsonl`` one
   line per invocation (command, machine, start, wall time, what ran, was skipped or failed), which
-  ``eval.results_doc`` reports.
+  ``eval.paper.results_doc`` reports.
 """
 
 from __future__ import annotations
@@ -30,7 +30,12 @@ from typing import Any
 from ebm_agent.checkpoint_files import atomic_path
 from eval.executors import Executor
 from eval.jobs import Job, JobResult
-from eval.parts import Part
+from eval.paper import figures
+from eval.paper.experiments import build_parts, describe_experiments, make_context, select_parts
+from eval.paper.figures.common import _current_seed_files, figure_digest, figure_state, recorded_figure_digests
+from eval.paper.parts import Part
+from eval.paper.records import FIGURE_STARTED, restore_records, save_records
+from eval.paper.results_doc import write_results
 from eval.provenance import (
     append_session,
     completed_result,
@@ -43,7 +48,6 @@ from eval.provenance import (
     read_provenance,
     write_provenance,
 )
-from eval.records import FIGURE_STARTED, SEED_FOLDER
 
 Log = Callable[[str], None]
 
@@ -199,58 +203,7 @@ def _parts_by_run(parts: Sequence[Part]) -> dict[Path, list[str]]:
     return names
 
 
-def figure_complete(part: Part) -> bool:
-    """Whether the figure part's folder holds a ``figure.json`` made at the part's scale and seeds, under today's
-    library defaults (:func:`figure_state` is ``"complete"``).
-
-    :param part: a figure part.
-    :return: True when complete.
-    """
-    return figure_state(part) == "complete"
-
-
-def figure_state(part: Part) -> str:
-    """What the figure part's folder holds.
-
-    A figure is made under the defaults of the agents it trains (``eval.figures_common.figure_digest``); one made
-    under others is ``"retired"``, as a table's run is (``eval.provenance.is_current_run``): ``ebm-eval
-    --experiment`` makes it again, and the report says that a rerun is pending. The digest is read from the figure's
-    ``provenance.json`` or, for a figure finished before it recorded one, from its kept seeds (``seeds/*.json``); a
-    figure with neither is taken as it is, as a run finished before runs recorded their defaults.
-
-    :param part: a figure part.
-    :return: ``"complete"``, ``"retired"`` (made under other library defaults) or ``"missing"`` (not finished, or of
-        another scale or seeds).
-    """
-    from eval.figures_common import figure_digest
-
-    folder = part.figure_dir
-    record = read_provenance(folder)
-    if not (folder / "figure.json").exists() or record is None:
-        return "missing"
-    if record.get("scale") != part.scale or list(record.get("seeds", [])) != list(part.seeds):
-        return "missing"
-    current = figure_digest(str(part.figure))
-    recorded = recorded_figure_digests(folder, record)
-    return "retired" if current is not None and any(digest != current for digest in recorded) else "complete"
-
-
-def recorded_figure_digests(folder: Path | str, record: dict[str, Any]) -> set[str]:
-    """The defaults digests a finished figure was made under: its provenance's, else its kept seeds'.
-
-    :param folder: the figure's folder (in a results folder or the records).
-    :param record: its ``provenance.json``.
-    :return: the digests (empty for a figure finished before it recorded any).
-    """
-    folder = Path(folder)
-    if isinstance(record.get("defaults_digest"), str):
-        return {record["defaults_digest"]}
-    seeds = [read_json_dict(path) or {} for path in sorted((folder / SEED_FOLDER).glob("*.json"))]
-    return {seed["defaults_digest"] for seed in seeds if isinstance(seed.get("defaults_digest"), str)}
-
-
 def _run_figure(part: Part, command: str, summary: RunSummary, log: Log) -> None:
-    from eval.figures_common import figure_digest
 
     folder = part.figure_dir
     state = figure_state(part)
@@ -308,7 +261,6 @@ def _pin_recorded_digest(folder: Path, figure: str) -> None:
     """Write a retired figure's earlier digest into its ``provenance.json`` (older figures kept it only in their
     seeds): as the rerun replaces the seeds, the old ``figure.json`` must not pass for a current one before the new
     one is written."""
-    from eval.figures_common import figure_digest
 
     record = read_provenance(folder) or {}
     if isinstance(record.get("defaults_digest"), str):
@@ -317,31 +269,6 @@ def _pin_recorded_digest(folder: Path, figure: str) -> None:
     if stale:
         fields_ = {key: value for key, value in record.items() if key != "command"}
         write_provenance(folder, str(record.get("command", "unknown")), **{**fields_, "defaults_digest": stale[0]})
-
-
-def figure_seeds_kept(part: Part) -> list[int]:
-    """The part's seeds already made under today's defaults and kept in its folder (``seeds/*.json``), which the
-    next ``ebm-eval --experiment`` reuses: the progress of a figure that is not finished, or is being made again.
-
-    :param part: a figure part.
-    :return: those seeds, sorted; only seeds the part asks for.
-    """
-    if part.figure is None:
-        return []
-    seeds = {(read_json_dict(path) or {}).get("seed") for path in _current_seed_files(part.figure_dir, str(part.figure))}
-    return sorted(seed for seed in seeds if isinstance(seed, int) and seed in part.seeds)
-
-
-def _current_seed_files(folder: Path, figure: str) -> list[Path]:
-    """The kept seeds (``seeds/*.json``) a resumed figure reuses: those made under today's defaults (the figure
-    computes the others again, ``eval.figures_common.seed_result``)."""
-    from eval.figures_common import figure_digest
-
-    current = figure_digest(figure)
-    kept = sorted((folder / SEED_FOLDER).glob("*.json"))
-    if current is None:
-        return kept
-    return [path for path in kept if (read_json_dict(path) or {}).get("defaults_digest") == current]
 
 
 @dataclass
@@ -370,21 +297,17 @@ class EarlierSeeds:
 
 
 def figure_function(name: str) -> Callable[..., Any]:
-    """The ``eval.figures`` function of a figure part, imported when needed.
+    """The ``eval.paper.figures`` function of a figure part.
 
-    :param name: its name (a key of ``eval.figures.FIGURES``).
+    :param name: its name (a key of ``eval.paper.figures.FIGURES``).
     :return: ``function(out_dir, *, seeds, scale) -> FigureResult``.
-    :raises ValueError: when ``eval.figures`` or the function is missing.
+    :raises ValueError: when the function is missing.
     """
-    try:
-        from eval import figures  # type: ignore[attr-defined]
-    except ImportError as error:
-        raise ValueError(f"figure {name!r} needs eval.figures, which cannot be imported: {error}") from None
     registry = getattr(figures, "FIGURES", {})
     function = registry.get(name) if isinstance(registry, dict) else None
     function = function or getattr(figures, name, None)
     if not callable(function):
-        raise ValueError(f"eval.figures has no figure {name!r}")
+        raise ValueError(f"eval.paper.figures has no figure {name!r}")
     return function  # type: ignore[no-any-return]
 
 
@@ -395,7 +318,6 @@ def selected_parts(settings: dict[str, Any]) -> list[Part]:
     :return: the parts.
     :raises ValueError: for a ``--part`` glob that matches no part.
     """
-    from eval.experiments import build_parts, make_context, select_parts
 
     if settings["experiments"] == ["list"] or settings["report_only"]:
         return []
@@ -434,7 +356,7 @@ def run_experiments(
 
     With ``settings["records"]`` (``docs/records`` for the published document) the recorded runs are restored into
     the results folder first (so they are skipped and reported) and every finished run is recorded after
-    (``eval.records``); the document then reports the protocol's seeds whatever ``--seeds`` ran (``--report-only
+    (``eval.paper.records``); the document then reports the protocol's seeds whatever ``--seeds`` ran (``--report-only
     --seeds`` still reports those seeds).
 
     :param settings: from ``eval.cli.resolve_experiment_settings``.
@@ -444,9 +366,6 @@ def run_experiments(
     :param progress: show progress bars.
     :return: 0 when nothing failed, else 1.
     """
-    from eval.experiments import describe_experiments, make_context
-    from eval.records import restore_records, save_records
-    from eval.results_doc import write_results
 
     if settings["experiments"] == ["list"]:
         context = make_context(settings["scale"], settings["out"], settings["seeds"])
@@ -469,7 +388,6 @@ def run_experiments(
 
 __all__ = [
     "RunSummary",
-    "figure_complete",
     "figure_function",
     "plan_jobs",
     "run_experiments",

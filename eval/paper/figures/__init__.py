@@ -20,7 +20,7 @@ name                        what it reproduces
 Example::
 
     from pathlib import Path
-    from eval.figures import FIGURES
+    from eval.paper.figures import FIGURES
 
     result = FIGURES["plan_diversity"](Path("results/plan_diversity"), seeds=[0, 1, 2])
     print(result.table_md)
@@ -30,12 +30,12 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from eval.figures_callbacks import EnergyMapCallback, VisitedStatesCallback, grid_coverage, original_voxel_occupancy
-from eval.figures_common import SCALES, FigureBudget, FigureResult, budget_for
-from eval.figures_energy import energy_maps
-from eval.figures_exploration import maze_exploration, sawyer_exploration
-from eval.figures_obstacle import OBSTACLE_BOX, obstacle_generalisation, obstacle_optimum
-from eval.figures_planning import plan_diversity, reacher_directions
+from eval.paper.figures.callbacks import EnergyMapCallback, VisitedStatesCallback, grid_coverage, original_voxel_occupancy
+from eval.paper.figures.common import SCALES, FigureBudget, FigureResult, budget_for
+from eval.paper.figures.energy import energy_maps
+from eval.paper.figures.exploration import maze_exploration, sawyer_exploration
+from eval.paper.figures.obstacle import OBSTACLE_BOX, obstacle_generalisation, obstacle_optimum
+from eval.paper.figures.planning import plan_diversity, reacher_directions
 
 FIGURES: dict[str, Callable[..., FigureResult]] = {
     "obstacle_generalisation": obstacle_generalisation,

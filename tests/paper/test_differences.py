@@ -1,11 +1,11 @@
-"""The 'where we differ from the paper' section: computed from the numbers, explained from eval/differences.py."""
+"""The 'where we differ from the paper' section: computed from the numbers, explained from eval/paper/differences.py."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from eval.differences import explain, find_differences, render_differences
-from eval.parts import Cell
+from eval.paper.differences import explain, find_differences, render_differences
+from eval.paper.parts import Cell
 
 
 def _cell(agent: str = "ebm", paper: float | None = -20.0) -> Cell:

@@ -3,7 +3,7 @@
 The EBM explores with its goal energy switched off (``cost={"goal_weight": 0}``): plans follow the learned energy
 and the acceleration prior only, so where it goes is decided by the energy landscape, which is low on unexplored
 regions that training has not shaped yet (paper Sec. 3.3). Both agents consume the same number of transitions, and
-what they visit is recorded during training by :class:`~eval.figures_callbacks.VisitedStatesCallback`.
+what they visit is recorded during training by :class:`~eval.paper.figures.callbacks.VisitedStatesCallback`.
 
 - Maze: coverage = fraction of the cells of the original's 20 x 20 heatmap grid over [-1, 1]^2 with a visit (and,
   since the walls make some cells unreachable, the fraction of cells that hold free space). Random actions are
@@ -28,7 +28,7 @@ import numpy as np
 
 from baselines.random_agent import RandomAgent
 from envs.maze import maze_valid
-from eval.figures_callbacks import (
+from eval.paper.figures.callbacks import (
     VisitedStatesCallback,
     grid_counts,
     grid_coverage,
@@ -36,7 +36,7 @@ from eval.figures_callbacks import (
     log_checkpoints,
     original_voxel_occupancy,
 )
-from eval.figures_common import (
+from eval.paper.figures.common import (
     FigureResult,
     budget_for,
     build_ebm,

@@ -12,10 +12,11 @@ import pytest
 
 from eval.cli import main
 from eval.digest import class_defaults, env_inverse_dynamics_defaults, neutral_settings
-from eval.experiment_runner import figure_complete, run_parts, unique_jobs
-from eval.experiments import EXPERIMENTS, build_parts, make_context, select_parts
 from eval.jobs import Job, JobResult
-from eval.parts import SCALES, Part
+from eval.paper.experiments import EXPERIMENTS, build_parts, make_context, select_parts
+from eval.paper.figures.common import figure_complete
+from eval.paper.parts import SCALES, Part
+from eval.paper.runner import run_parts, unique_jobs
 from eval.pretraining import dataset_path, repeat_transitions
 from eval.provenance import completed_result, defaults_digest, job_fingerprint, read_provenance, read_sessions
 from eval.registry import AGENTS
@@ -62,7 +63,7 @@ def test_paper_numbers_sit_beside_the_cells(tmp_path):
     assert cells[("inverse_dynamics/sawyer", "ebm", "ground truth")].paper == -3782
     assert cells[("inverse_dynamics/sawyer", "ebm", "RLS")].paper == -4694
     assert cells[("fixed_on_variable/sawyer", "ebm", "trained fixed, evaluated variable")].paper == -4547
-    from eval.claims import CONTROL_CLAIMS, SCORE_CLAIMS
+    from eval.paper.claims import CONTROL_CLAIMS, SCORE_CLAIMS
 
     for claim in SCORE_CLAIMS + CONTROL_CLAIMS:  # every claim names cells that exist
         for _label, better, worse in claim.comparisons:
@@ -284,7 +285,7 @@ def test_a_figure_part_runs_once_through_eval_figures(tmp_path, monkeypatch):
         payload = {"name": "plan_diversity", "pngs": ["plan.png"], "metrics": {"spread": 0.5}, "table_md": None}
         (Path(out_dir) / "figure.json").write_text(json.dumps({**payload, "command": "x"}))
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: fake_figure)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: fake_figure)
     parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
     summary = run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     assert summary.figures_ran == ["plan_diversity/particle"] and figure_complete(parts[0])
@@ -305,7 +306,7 @@ def test_a_figure_runs_at_the_local_executors_threads(tmp_path, monkeypatch):
         seen.append(torch.get_num_threads())
         (Path(out_dir) / "figure.json").write_text(json.dumps({"name": "plan_diversity", "pngs": [], "command": "x"}))
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: fake_figure)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: fake_figure)
     before = torch.get_num_threads()
     torch.set_num_threads(2)
     try:
@@ -326,7 +327,7 @@ class StoppedExecutor(FakeExecutor):
 
 def test_a_stopped_run_is_recorded_stopped_and_no_figure_starts(tmp_path, monkeypatch):
     calls = []
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: calls.append)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: calls.append)
     context = make_context("smoke", str(tmp_path))
     parts = [
         *select_parts(build_parts(["table1"], context), ["table1/particle/online"]),
@@ -346,7 +347,7 @@ def test_a_failing_figure_is_reported_not_raised(tmp_path, monkeypatch):
     def broken(out_dir, *, seeds, scale):
         raise RuntimeError("no figure today")
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: broken)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: broken)
     parts = build_parts(["energy_maps"], make_context("smoke", str(tmp_path)))
     summary = run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     assert not summary.ok and "no figure today" in summary.figures_failed["energy_maps/particle_maze"]
@@ -555,7 +556,7 @@ def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seed
         (Path(out_dir) / "seeds" / "plan_diversity_seed0.json").write_text("{}")
         raise KeyboardInterrupt
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_dies)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: figure_that_dies)
     parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
     for _ in range(2):
         with pytest.raises(KeyboardInterrupt):
@@ -570,8 +571,8 @@ def test_an_unfinished_figure_of_the_same_seeds_is_resumed_and_one_of_other_seed
 
 
 def test_a_resumed_figure_counts_the_time_of_the_seeds_earlier_processes_finished(tmp_path, monkeypatch):
-    from eval.figures_common import figure_digest
-    from eval.results_doc import part_status, parts_table
+    from eval.paper.figures.common import figure_digest
+    from eval.paper.results_doc import part_status, parts_table
 
     digest = figure_digest("plan_diversity")
 
@@ -589,10 +590,10 @@ def test_a_resumed_figure_counts_the_time_of_the_seeds_earlier_processes_finishe
         (Path(out_dir) / "figure.json").write_text("{}")
 
     parts = build_parts(["plan_diversity"], make_context("smoke", str(tmp_path)))
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_dies)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: figure_that_dies)
     with pytest.raises(KeyboardInterrupt):
         run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: figure_that_finishes)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: figure_that_finishes)
     run_parts(parts, FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     record = read_provenance(parts[0].figure_dir)
     assert record["earlier_seeds"] == 2 and record["earlier_seeds_untimed"] == 1
@@ -623,8 +624,7 @@ def _finished_figure(folder: Path, provenance: dict[str, Any], seed_digests: dic
 
 
 def test_a_figure_made_under_earlier_defaults_is_retired_and_made_again(tmp_path, monkeypatch):
-    from eval.experiment_runner import figure_state
-    from eval.figures_common import figure_digest
+    from eval.paper.figures.common import figure_digest, figure_state
 
     (part,) = build_parts(["obstacle"], make_context("smoke", str(tmp_path)))
     current, folder = figure_digest("obstacle_generalisation"), part.figure_dir
@@ -650,7 +650,7 @@ def test_a_figure_made_under_earlier_defaults_is_retired_and_made_again(tmp_path
             (Path(out_dir) / "seeds" / f"obstacle_generalisation_seed{seed}.json").write_text(json.dumps(record))
         raise RuntimeError("killed")
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: stopped_after_its_seeds)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: stopped_after_its_seeds)
     messages: list[str] = []
     summary = run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=messages.append)
     assert any("made under earlier library defaults: making it again" in m for m in messages)
@@ -660,16 +660,15 @@ def test_a_figure_made_under_earlier_defaults_is_retired_and_made_again(tmp_path
     def finishes(out_dir, *, seeds, scale):
         (Path(out_dir) / "figure.json").write_text(json.dumps({"name": "obstacle_generalisation", "metrics": {}}))
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: finishes)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: finishes)
     summary = run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     assert summary.figures_ran == [part.name] and figure_state(part) == "complete"
     assert read_provenance(folder)["defaults_digest"] == current
 
 
 def test_the_seeds_of_a_retired_figure_being_made_again_survive_in_the_records(tmp_path, monkeypatch):
-    from eval.experiment_runner import _current_seed_files, figure_state
-    from eval.figures_common import figure_digest
-    from eval.records import restore_records, save_records
+    from eval.paper.figures.common import _current_seed_files, figure_digest, figure_state
+    from eval.paper.records import restore_records, save_records
 
     out, records, fresh = tmp_path / "out", tmp_path / "records", tmp_path / "fresh"
     (part,) = build_parts(["obstacle"], make_context("smoke", str(out)))
@@ -682,7 +681,7 @@ def test_the_seeds_of_a_retired_figure_being_made_again_survive_in_the_records(t
         (Path(out_dir) / "seeds" / "obstacle_generalisation_seed0.json").write_text(json.dumps(record))
         raise RuntimeError("the session ended")
 
-    monkeypatch.setattr("eval.experiment_runner.figure_function", lambda name: stopped_after_its_seed)
+    monkeypatch.setattr("eval.paper.runner.figure_function", lambda name: stopped_after_its_seed)
     run_parts([part], FakeExecutor(), "ebm-eval fig", progress=False, log=lambda _m: None)
     save_records(out, records)
     restore_records(records, fresh)  # the next session's checkout

@@ -1,6 +1,6 @@
 """What every paper-figure experiment shares: its result record, its budgets per scale, and small helpers.
 
-The experiments themselves live in ``eval/figures_*.py``; ``eval.figures`` gathers them in ``FIGURES``. Each one
+The experiments themselves live in ``eval/figures_*.py``; ``eval.paper.figures`` gathers them in ``FIGURES``. Each one
 trains what it needs (seeded), measures, writes PNGs and a ``figure.json`` (a :class:`FigureResult`) under its
 output folder. Two scales: ``"paper"`` (the paper's budgets: 50k online transitions, 100k random transitions for
 pretraining) and ``"smoke"`` (tens of transitions and a tiny planner, so that tests run in seconds).
@@ -8,6 +8,7 @@ pretraining) and ``"smoke"`` (tens of transitions and a tiny planner, so that te
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import sys
@@ -18,6 +19,11 @@ from pathlib import Path
 from typing import Any
 
 import matplotlib
+import matplotlib.pyplot as plt
+
+from ebm_agent.checkpoint_files import atomic_path
+from eval.paper.parts import Part
+from eval.provenance import agent_defaults_digest, read_json_dict, read_provenance
 
 matplotlib.use("Agg")  # files only: experiments run headless
 
@@ -28,7 +34,7 @@ from matplotlib.figure import Figure
 import envs  # noqa: F401  registers the ebm/ ids
 from ebm_agent import EBMPlannerAgent, collect_random_transitions
 from ebm_agent.presets import PAPER_EBM, merge_settings
-from eval.records import SEED_FOLDER
+from eval.paper.records import SEED_FOLDER
 
 PAPER_SCORES: dict[str, dict[str, float]] = {
     "obstacle_generalisation": {"ebm": -61.94, "action_ff": -81.24},
@@ -40,7 +46,7 @@ PAPER_SCORES: dict[str, dict[str, float]] = {
 class FigureResult:
     """What one figure experiment produced.
 
-    :param name: the experiment's name, a key of ``eval.figures.FIGURES`` (e.g. ``"plan_diversity"``).
+    :param name: the experiment's name, a key of ``eval.paper.figures.FIGURES`` (e.g. ``"plan_diversity"``).
     :param pngs: the PNG files written (under the output folder).
     :param metrics: the numbers behind the figure, JSON-serialisable.
     :param table_md: a markdown table for docs/results.md, or None.
@@ -191,13 +197,13 @@ def check_seeds(seeds: Sequence[int]) -> list[int]:
 
 
 EXPERIMENT_NAMES: dict[str, str] = {"obstacle_generalisation": "obstacle"}
-"""Figure name -> its ``ebm-eval --experiment`` name where they differ (eval/experiments.py)."""
+"""Figure name -> its ``ebm-eval --experiment`` name where they differ (eval/paper/experiments.py)."""
 
 
 def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     """The ``ebm-eval`` command line that reruns one figure experiment.
 
-    :param name: the figure (a key of ``eval.figures.FIGURES``).
+    :param name: the figure (a key of ``eval.paper.figures.FIGURES``).
     :param scale: its scale.
     :param seeds: its seeds.
     :return: the command.
@@ -218,9 +224,6 @@ def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id:
     :param env_id: the env the defaults are read for.
     :return: 16 hex digits.
     """
-    import hashlib
-
-    from eval.provenance import agent_defaults_digest
 
     parts = "/".join(str(agent_defaults_digest(agent, env_id, FIGURE_PRESET)) for agent in agents)
     return hashlib.sha256(parts.encode()).hexdigest()[:16]
@@ -241,10 +244,10 @@ Energy maps trains on the particle and the maze; its seeds have always recorded 
 def figure_digest(figure: str) -> str | None:
     """The defaults digest a figure's results are valid for (:func:`figure_defaults_digest` of its agents).
 
-    A finished figure records it (``provenance.json``); ``eval.experiment_runner.figure_complete`` takes a figure made
+    A finished figure records it (``provenance.json``); ``eval.paper.runner.figure_complete`` takes a figure made
     under other defaults as not finished, so that ``ebm-eval --experiment`` reruns it and the report says so.
 
-    :param figure: a key of ``eval.figures.FIGURES``.
+    :param figure: a key of ``eval.paper.figures.FIGURES``.
     :return: 16 hex digits, or None for a figure that declares no agents (its results are taken as they are).
     """
     if figure not in FIGURE_AGENTS:
@@ -276,8 +279,6 @@ def seed_result(
     :param digest: the defaults' digest the result is valid for (default: :func:`figure_defaults_digest`).
     :return: the seed's result, as JSON types.
     """
-    from ebm_agent.checkpoint_files import atomic_path
-    from eval.provenance import read_json_dict
 
     digest = figure_defaults_digest() if digest is None else digest
     path = seed_result_path(out_dir, figure, seed)
@@ -365,7 +366,6 @@ def save_png(figure: Figure, path: Path) -> Path:
     :param path: the file.
     :return: ``path``.
     """
-    import matplotlib.pyplot as plt
 
     try:
         if figure.get_layout_engine() is None:
@@ -426,6 +426,79 @@ def _relative_to(path: Path, folder: Path) -> str:
         return str(path)
 
 
+def figure_complete(part: Part) -> bool:
+    """Whether the figure part's folder holds a ``figure.json`` made at the part's scale and seeds, under today's
+    library defaults (:func:`figure_state` is ``"complete"``).
+
+    :param part: a figure part.
+    :return: True when complete.
+    """
+    return figure_state(part) == "complete"
+
+
+def figure_state(part: Part) -> str:
+    """What the figure part's folder holds.
+
+    A figure is made under the defaults of the agents it trains (``eval.paper.figures.common.figure_digest``); one made
+    under others is ``"retired"``, as a table's run is (``eval.provenance.is_current_run``): ``ebm-eval
+    --experiment`` makes it again, and the report says that a rerun is pending. The digest is read from the figure's
+    ``provenance.json`` or, for a figure finished before it recorded one, from its kept seeds (``seeds/*.json``); a
+    figure with neither is taken as it is, as a run finished before runs recorded their defaults.
+
+    :param part: a figure part.
+    :return: ``"complete"``, ``"retired"`` (made under other library defaults) or ``"missing"`` (not finished, or of
+        another scale or seeds).
+    """
+
+    folder = part.figure_dir
+    record = read_provenance(folder)
+    if not (folder / "figure.json").exists() or record is None:
+        return "missing"
+    if record.get("scale") != part.scale or list(record.get("seeds", [])) != list(part.seeds):
+        return "missing"
+    current = figure_digest(str(part.figure))
+    recorded = recorded_figure_digests(folder, record)
+    return "retired" if current is not None and any(digest != current for digest in recorded) else "complete"
+
+
+def recorded_figure_digests(folder: Path | str, record: dict[str, Any]) -> set[str]:
+    """The defaults digests a finished figure was made under: its provenance's, else its kept seeds'.
+
+    :param folder: the figure's folder (in a results folder or the records).
+    :param record: its ``provenance.json``.
+    :return: the digests (empty for a figure finished before it recorded any).
+    """
+    folder = Path(folder)
+    if isinstance(record.get("defaults_digest"), str):
+        return {record["defaults_digest"]}
+    seeds = [read_json_dict(path) or {} for path in sorted((folder / SEED_FOLDER).glob("*.json"))]
+    return {seed["defaults_digest"] for seed in seeds if isinstance(seed.get("defaults_digest"), str)}
+
+
+def figure_seeds_kept(part: Part) -> list[int]:
+    """The part's seeds already made under today's defaults and kept in its folder (``seeds/*.json``), which the
+    next ``ebm-eval --experiment`` reuses: the progress of a figure that is not finished, or is being made again.
+
+    :param part: a figure part.
+    :return: those seeds, sorted; only seeds the part asks for.
+    """
+    if part.figure is None:
+        return []
+    seeds = {(read_json_dict(path) or {}).get("seed") for path in _current_seed_files(part.figure_dir, str(part.figure))}
+    return sorted(seed for seed in seeds if isinstance(seed, int) and seed in part.seeds)
+
+
+def _current_seed_files(folder: Path, figure: str) -> list[Path]:
+    """The kept seeds (``seeds/*.json``) a resumed figure reuses: those made under today's defaults (the figure
+    computes the others again, ``eval.paper.figures.common.seed_result``)."""
+
+    current = figure_digest(figure)
+    kept = sorted((folder / SEED_FOLDER).glob("*.json"))
+    if current is None:
+        return kept
+    return [path for path in kept if (read_json_dict(path) or {}).get("defaults_digest") == current]
+
+
 __all__ = [
     "EXPERIMENT_NAMES",
     "FIGURE_AGENTS",
@@ -437,10 +510,14 @@ __all__ = [
     "budget_for",
     "build_ebm",
     "check_seeds",
+    "figure_complete",
     "figure_defaults_digest",
     "figure_digest",
+    "figure_seeds_kept",
+    "figure_state",
     "markdown_table",
     "pretrained_ebm",
+    "recorded_figure_digests",
     "reproduce_command",
     "run_episode",
     "save_png",
