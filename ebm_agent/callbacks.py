@@ -1,14 +1,18 @@
-"""SB3 callbacks of the planner agents: resumable checkpoints that a crash mid-``learn`` cannot corrupt."""
+"""SB3 callbacks of the planner agents: resumable checkpoints that a crash mid-``learn`` cannot corrupt, and the
+model-quality probe logged during ``learn``."""
 
 from __future__ import annotations
 
 import contextlib
 import pathlib
 
+import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.callbacks import CheckpointCallback
+from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 
 from ebm_agent.checkpoint_files import replace_with_link
+from ebm_agent.datasets import TransitionDataset, collect_random_transitions
+from ebm_agent.probe import FeasibilityResult, NextStateRankResult, can_label_feasibility, feasibility_auroc, next_state_rank
 
 
 class ResumableCheckpointCallback(CheckpointCallback):
@@ -77,4 +81,106 @@ def latest_checkpoint(save_path: str | pathlib.Path, name_prefix: str = "checkpo
     return path if path.is_file() else None
 
 
-__all__ = ["ResumableCheckpointCallback", "latest_checkpoint"]
+class ModelProbeCallback(BaseCallback):
+    """Log the model-quality probe of :mod:`ebm_agent.probe` every ``every`` callback calls during ``learn``.
+
+    Keys (SB3 logger, so TensorBoard when the agent has ``tensorboard_log``):
+
+    - ``probe/next_state_rank``: top-1 rate of the real next state among ``n_candidates`` perturbed ones, on
+      ``n_transitions`` held-out random transitions of ``eval_env`` collected once at the start;
+      ``probe/next_state_mean_rank``: its mean normalised rank (0 perfect, 0.5 chance).
+    - where ``eval_env`` can label feasibility (particle with a box, maze): ``probe/feasibility_auroc``, over states
+      near the agent's replay buffer (``pos_buffer``) once it holds data, else over uniform valid states, and
+      ``probe/feasibility_auroc_uniform`` over uniform valid states.
+
+    The probe leaves the agent's weights, modes, buffers and random streams as they were, so ``learn`` runs the same
+    with or without it; each probe uses its own seed (``seed`` + the probe's index).
+
+    :param eval_env: a gymnasium env of the agent's task (not a VecEnv) that only the probe steps.
+    :param every: callback calls (vectorised env steps) between probes.
+    :param n_moves: (state, move) samples of each feasibility AUROC.
+    :param n_transitions: held-out transitions of the next-state rank.
+    :param n_candidates: perturbed candidates per transition.
+    :param scale: candidate noise, in std(s' - s) (see :func:`~ebm_agent.probe.next_state_rank`).
+    :param held_out: held-out transitions to rank instead of random ones collected from ``eval_env``.
+    :param seed: seed of the held-out data and of the probes.
+    :param verbose: 1 prints each probe.
+    """
+
+    def __init__(
+        self,
+        eval_env: gym.Env,
+        every: int = 10_000,
+        n_moves: int = 2000,
+        n_transitions: int = 1000,
+        n_candidates: int = 64,
+        scale: float = 1.0,
+        held_out: TransitionDataset | None = None,
+        seed: int = 0,
+        verbose: int = 0,
+    ) -> None:
+        super().__init__(verbose)
+        if isinstance(every, bool) or not isinstance(every, int | np.integer) or every < 1:
+            raise ValueError(f"every must be a positive int (callback calls between probes), got {every!r}.")
+        if not isinstance(eval_env, gym.Env):
+            raise TypeError(f"ModelProbeCallback needs a gymnasium env (not a VecEnv), got {type(eval_env).__name__}.")
+        self.eval_env = eval_env
+        self.every = int(every)
+        self.n_moves = n_moves
+        self.n_transitions = n_transitions
+        self.n_candidates = n_candidates
+        self.scale = scale
+        self.held_out = held_out
+        self.seed = seed
+        self.can_label = False
+        self.num_probes = 0
+        self.last_feasibility: FeasibilityResult | None = None
+        self.last_rank: NextStateRankResult | None = None
+
+    def _init_callback(self) -> None:
+        if not callable(getattr(self.model, "energy_model", None)):
+            raise TypeError(f"ModelProbeCallback needs an agent with an energy_model; {type(self.model).__name__} has none.")
+        if self.held_out is None:
+            self.held_out = collect_random_transitions(self.eval_env, self.n_transitions, seed=self.seed)
+        self.can_label = can_label_feasibility(self.eval_env)
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self.probe()
+        return True
+
+    def probe(self) -> dict[str, float]:
+        """Run the probe now and record its keys in the agent's logger.
+
+        :return: the recorded values by key.
+        """
+        assert self.held_out is not None, "the callback is not initialised: pass it to learn()"
+        seed = self.seed + self.num_probes
+        self.num_probes += 1
+        rank = next_state_rank(self.model, self.held_out, self.n_candidates, self.scale, seed=seed)
+        values = {"probe/next_state_rank": rank.top1, "probe/next_state_mean_rank": rank.mean_rank}
+        self.last_rank = rank
+        if self.can_label:
+            uniform = feasibility_auroc(self.model, self.eval_env, self.n_moves, seed=seed)
+            near = self._buffer_states(np.random.default_rng(seed))
+            feasibility = (
+                uniform if near is None else feasibility_auroc(self.model, self.eval_env, self.n_moves, near=near, seed=seed)
+            )
+            values.update({"probe/feasibility_auroc": feasibility.auroc, "probe/feasibility_auroc_uniform": uniform.auroc})
+            self.last_feasibility = feasibility
+        for key, value in values.items():
+            self.logger.record(key, value)
+        if self.verbose >= 1:
+            print(f"probe at {self.num_timesteps} steps: " + ", ".join(f"{k} {v:.4f}" for k, v in values.items()))
+        return values
+
+    def _buffer_states(self, rng: np.random.Generator) -> np.ndarray | None:
+        """Up to ``n_moves`` states of the agent's real-transition buffer (read by index: its own generator is untouched)."""
+        buffer = getattr(self.model, "pos_buffer", None)
+        if buffer is None or len(buffer) == 0:
+            return None
+        indices = rng.choice(len(buffer), size=min(len(buffer), self.n_moves), replace=False)  # [M]
+        return np.asarray(buffer.get(indices).states)
+
+
+__all__ = ["ModelProbeCallback", "ResumableCheckpointCallback", "latest_checkpoint"]
