@@ -33,7 +33,8 @@ INVERSE_ANGLE_WEIGHT = 1.0
 
 One env step of full torque moves a normalised angle by about 0.0126 and a velocity / 10 by about 0.40, so with equal
 weights a wanted state that the torques cannot reach is fitted almost entirely on its velocity dims: a plan that moves
-the angles towards the goal without the matching velocities yields torques near 0 (``scripts/reacher_plan_gap.py``)."""
+the angles towards the goal without the matching velocities yields torques near 0 (measured by the retired probe
+reacher_plan_gap, docs/notes/probes.md#probereacher_plan_gap)."""
 
 _LINK_LENGTHS = (0.1, 0.11)  # shoulder-to-elbow and elbow-to-fingertip (Reacher-v4 XML).
 

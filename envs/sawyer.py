@@ -53,7 +53,7 @@ INVERSE_RESCUE_CEILING = 0.1
 """Default residual norm above which the inverse dynamics takes a wanted next state as out of reach and skips the
 multi-start rescue (``envs.mujoco_inverse``). Real transitions that stall beside a joint limit stall below 0.03; a
 plan's next state is off by 2-26, where the rescue removed a median 7 % of the squared residual at 25x the cost
-(``scripts/sawyer_inverse_rescue.py``, docs/mujoco_envs.md)."""
+(the retired probe sawyer_inverse_rescue, docs/notes/probes.md#probesawyer_inverse_rescue; docs/mujoco_envs.md)."""
 
 FINGER_SENSORS = ("finger_right", "finger_left")
 """``framepos`` sensors of the two finger-pad sites (their mean is the finger); the inverse dynamics reads them."""

@@ -38,8 +38,6 @@ CSV_COLUMNS = (
 )
 """Columns of ``results.csv``, in order."""
 
-MIN_SEEDS_FOR_IQM = 3
-
 
 @dataclass(frozen=True)
 class AgentSummary:
@@ -94,7 +92,7 @@ def summarize(results: Sequence[JobResult], bootstrap_reps: int = 2000, seed: in
         per_seed = np.array([r.score_mean for r in finished])  # [seeds]
         episodes = np.array([score for r in finished for score in r.episode_scores], dtype=np.float64)  # [seeds x episodes]
         successes = [r.success_rate for r in finished if r.success_rate is not None]
-        enough = len(finished) >= MIN_SEEDS_FOR_IQM
+        enough = len(finished) >= stats.MIN_SEEDS_FOR_CI
         summaries.append(
             AgentSummary(
                 env=env,
@@ -226,7 +224,7 @@ def render_markdown(
         "",
         "Score: undiscounted sum of per-step rewards of one deterministic evaluation episode (the paper's metric). "
         "± is the population std (ddof=0); IQM [95% CI] (stratified bootstrap over seeds) needs at least "
-        f"{MIN_SEEDS_FOR_IQM} seeds.",
+        f"{stats.MIN_SEEDS_FOR_CI} seeds.",
         "",
         results_table(summarize(results, bootstrap_reps=bootstrap_reps)),
     ]

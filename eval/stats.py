@@ -22,6 +22,9 @@ from scipy import stats as scipy_stats
 
 ArrayLike = Sequence[float] | np.ndarray
 
+MIN_SEEDS_FOR_CI = 3
+"""The fewest seeds from which the harness computes a 95% interval (and an IQM) and judges by it."""
+
 
 def _as_array(values: ArrayLike, name: str = "values") -> np.ndarray:
     array = np.asarray(values, dtype=np.float64)
@@ -154,4 +157,4 @@ def bootstrap_difference_ci(
     return float(lower), float(upper)
 
 
-__all__ = ["bootstrap_ci", "bootstrap_difference_ci", "iqm", "mean", "standard_error", "std"]
+__all__ = ["MIN_SEEDS_FOR_CI", "bootstrap_ci", "bootstrap_difference_ci", "iqm", "mean", "standard_error", "std"]

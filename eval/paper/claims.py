@@ -1,8 +1,8 @@
 """The reproduction's claims (issue 6), judged from the measured numbers: "holds", "inconclusive", "does not hold" or
 "not measured".
 
-Nothing here knows a verdict in advance: each claim names the numbers it compares (table cells by part, agent and
-evaluation; exploration figures by part) and ``evaluate_claims`` reads them through the lookups it is given.
+Nothing here knows a verdict in advance: each claim names the numbers it compares (table cells by id; exploration
+figures by part and metric keys) and ``evaluate_claims`` reads them through the lookups it is given.
 
 - A score comparison does not hold when the first agent's mean over seeds is not higher (scores are sums of
   rewards: higher is better). With at least 3 seeds on each side it holds when the two means' 95%
@@ -20,27 +20,23 @@ evaluation; exploration figures by part) and ``evaluate_claims`` reads them thro
   vs each random explorer's occupancy at that same budget, against the strongest random explorer (highest mean).
   Keys are slash-joined paths into the nested metrics (``agents/ebm/coverage/mean``). Where both numbers have
   per-seed values beside them (``.../per_seed``), they are judged as scores are: the 95% intervals must separate
-  from 3 seeds on. Otherwise the means alone decide, and the evidence says no interval was computed. Should the
-  keys be missing, a pair of keys that differ only by ``ebm`` / ``random`` is used instead (spread statistics such
-  as ``std`` excluded).
+  from 3 seeds on. Otherwise the means alone decide, and the evidence says no interval was computed. A figure
+  whose metrics lack the keys is "not measured".
+
+The claims themselves, with the cells and figures each compares, are data: ``paper.yaml``, ``claims``.
 """
 
 from __future__ import annotations
 
-import re
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from eval import stats
-
-LEARNING_CONTROL = (
-    "Control, not a claim of the paper: the online EBM beats the same agent untrained (what its planner and the env's "
-    "ground-truth inverse dynamics do with no learned energy)"
-)
-"""Where this fails, a win of the EBM over the other agents on that env is not a win of its learned energy."""
+from eval.paper.data import note, paper_data
+from eval.paper.parts import AGENT_LABELS
 
 HOLDS = "holds"
 INCONCLUSIVE = "inconclusive"
@@ -56,7 +52,8 @@ ScoreLookup = Callable[[CellKey], Sequence[float]]
 FigureLookup = Callable[[str], Mapping[str, Any] | None]
 """A figure part's metrics; None when it has not run."""
 
-MIN_SEEDS_FOR_CI = 3
+Retired = Callable[[CellKey], int]
+"""Runs of a cell made with earlier library defaults."""
 
 
 @dataclass(frozen=True)
@@ -66,11 +63,13 @@ class Comparison:
     :param label: what it compares on (an env).
     :param verdict: ``HOLDS``, ``INCONCLUSIVE``, ``FAILS`` or ``MISSING``.
     :param evidence: the numbers, in words.
+    :param why: the ``notes.md`` id of what we know of why it does not hold, or None.
     """
 
     label: str
     verdict: str
     evidence: str
+    why: str | None = None
 
 
 @dataclass(frozen=True)
@@ -88,187 +87,97 @@ class Claim:
 
 
 @dataclass(frozen=True)
-class ScoreClaim:
-    """A claim that one agent scores higher than another, on each listed env.
+class ComparisonSpec:
+    """One comparison of a claim, as ``paper.yaml`` states it.
 
-    :param text: the claim.
-    :param comparisons: (env label, the cell that should score higher, the other cell).
-    """
-
-    text: str
-    comparisons: tuple[tuple[str, CellKey, CellKey], ...]
-
-
-SCORE_CLAIMS = (
-    ScoreClaim(
-        "Online EBM beats online Action FF on particle, maze, Reacher and Sawyer",
-        (
-            ("particle", ("table1/particle/online", "ebm", "online"), ("table1/particle/online", "action-ff", "online")),
-            ("maze", ("table1/maze/online", "ebm", "online"), ("table1/maze/online", "action-ff", "online")),
-            ("reacher", ("table1/reacher/online", "ebm", "online"), ("table1/reacher/online", "action-ff", "online")),
-            (
-                "sawyer",
-                ("table2/sawyer/online_fixed", "ebm", "online fixed"),
-                ("table2/sawyer/online_fixed", "action-ff", "online fixed"),
-            ),
-        ),
-    ),
-    ScoreClaim(
-        "EBM beats PPO at equal budget on Sawyer",
-        (("sawyer", ("table2/sawyer/online_fixed", "ebm", "online fixed"), ("sawyer_ppo/1x", "ppo", "PPO 1x")),),
-    ),
-)
-"""The claims decided by table cells (issue 6's "must show")."""
-
-DIRECTED_CLAIMS = (
-    ScoreClaim(
-        "Pretrained on the Sawyer, the EBM learns more from directed data than from random data (paper Sec. 4.2: "
-        "random interactions cover too few states; -4438 against -9569)",
-        (
-            (
-                "sawyer",
-                ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
-                ("table2/sawyer/pretrained_random", "ebm", "pretrained random"),
-            ),
-        ),
-    ),
-    ScoreClaim(
-        "Pretrained on directed data, the EBM beats Action FF on the Sawyer (paper: slightly, -4438 against -5041)",
-        (
-            (
-                "sawyer",
-                ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
-                ("table2/sawyer/pretrained_directed", "action-ff", "pretrained directed"),
-            ),
-        ),
-    ),
-)
-"""Table 2's findings on pretraining data (paper Sec. 4.2), decided as the score claims are."""
-
-
-@dataclass(frozen=True)
-class ChangeClaim:
-    """A claim that a change of setting costs one agent less than another: its score changes by more (drops less).
-
-    :param text: the claim.
-    :param comparisons: (env label, (the first agent's cell before, after), (the other agent's cell before, after)).
-    """
-
-    text: str
-    comparisons: tuple[tuple[str, tuple[CellKey, CellKey], tuple[CellKey, CellKey]], ...]
-
-
-CHANGE_CLAIMS = (
-    ChangeClaim(
-        "Trained on the directed data in sequential, correlated batches instead of shuffled ones, the EBM's score "
-        "drops less than Action FF's on the Sawyer (paper Sec. 4.2: by 676 against 7797)",
-        (
-            (
-                "sawyer",
-                (
-                    ("table2/sawyer/pretrained_directed", "ebm", "pretrained directed"),
-                    ("table2/sawyer/pretrained_directed_sequential", "ebm", "pretrained directed + sequential"),
-                ),
-                (
-                    ("table2/sawyer/pretrained_directed", "action-ff", "pretrained directed"),
-                    ("table2/sawyer/pretrained_directed_sequential", "action-ff", "pretrained directed + sequential"),
-                ),
-            ),
-        ),
-    ),
-)
-"""Table 2's sequential ablation (paper Sec. 4.2): the drop from shuffled to sequential batches, EBM vs Action FF."""
-
-CONTROL_CLAIMS = (
-    ScoreClaim(
-        LEARNING_CONTROL,
-        (
-            ("particle", ("table1/particle/online", "ebm", "online"), ("table1/particle/untrained", "ebm", "untrained")),
-            ("maze", ("table1/maze/online", "ebm", "online"), ("table1/maze/untrained", "ebm", "untrained")),
-            ("reacher", ("table1/reacher/online", "ebm", "online"), ("table1/reacher/untrained", "ebm", "untrained")),
-            (
-                "sawyer",
-                ("table2/sawyer/online_fixed", "ebm", "online fixed"),
-                ("table2/sawyer/untrained_fixed", "ebm", "untrained fixed"),
-            ),
-        ),
-    ),
-)
-"""Controls judged after the paper's claims, the same way: not claims of the paper, but what they rest on."""
-
-
-@dataclass(frozen=True)
-class NoLossClaim:
-    """A claim that one configuration loses no score against another: its mean lies within or above the other's 95%
-    bootstrap interval of the mean, on each listed cell pair.
-
-    :param text: the claim.
-    :param comparisons: (label, the new configuration's cell, the reference cell).
-    """
-
-    text: str
-    comparisons: tuple[tuple[str, CellKey, CellKey], ...]
-
-
-def _no_loss_pairs() -> tuple[tuple[str, CellKey, CellKey], ...]:
-    pairs = []
-    for env in ("particle", "maze", "reacher"):
-        for agent in ("ebm", "action-ff"):
-            label = f"{env}, {AGENT_NAMES[agent]}"
-            pairs.append(
-                (label, (f"table1/{env}/online_fast", agent, "fast preset"), (f"table1/{env}/online", agent, "online"))
-            )
-    for setting in ("online_fixed", "online_variable"):
-        for agent in ("ebm", "action-ff"):
-            label = f"sawyer {setting.split('_')[1]}, {AGENT_NAMES[agent]}"
-            fast = (f"table2/sawyer/{setting}_fast", agent, f"{setting.replace('_', ' ')}, fast preset")
-            pairs.append((label, fast, (f"table2/sawyer/{setting}", agent, setting.replace("_", " "))))
-    return tuple(pairs)
-
-
-@dataclass(frozen=True)
-class ExplorationSpec:
-    """Where an exploration figure keeps the EBM's number and the random explorers' numbers at the same budget.
-
-    :param label: the env.
-    :param part: the figure part.
-    :param ebm_key: the EBM's number (a slash-joined path into the metrics).
-    :param random_keys: the random explorers' numbers at the EBM's budget; the highest is compared.
+    :param label: what it compares on (an env).
+    :param cells: the cells compared: ``score``: (better, worse); ``no_loss``: (new, reference); ``change``: (first
+        agent before, after, other agent before, after); ``exploration``: none.
+    :param why: the ``notes.md`` id shown while the comparison does not hold, or None.
+    :param figure: ``exploration`` only: the figure part.
+    :param ebm_key: ``exploration`` only: the EBM's number, a slash-joined path into the figure's metrics.
+    :param random_keys: ``exploration`` only: the random explorers' numbers at the EBM's budget; the highest is
+        compared.
     """
 
     label: str
-    part: str
-    ebm_key: str
-    random_keys: tuple[str, ...]
+    cells: tuple[CellKey, ...] = ()
+    why: str | None = None
+    figure: str = ""
+    ebm_key: str = ""
+    random_keys: tuple[str, ...] = ()
 
 
-EXPLORATION_CLAIM = "EBM explores more than random actions (maze coverage, Sawyer finger occupancy)"
-EXPLORATION_FIGURES = (
-    ExplorationSpec("maze", "maze_exploration/maze", "agents/ebm/coverage/mean", ("agents/random/coverage/mean",)),
-    ExplorationSpec(
-        "sawyer",
-        "sawyer_exploration/sawyer",
-        "agents/ebm/occupancy/mean",
-        ("agents/random_uniform/occupancy_at_ebm_budget/mean", "agents/random_joint_targets/occupancy_at_ebm_budget/mean"),
-    ),
-)
-"""The exploration claim's figures."""
+@dataclass(frozen=True)
+class ClaimSpec:
+    """A claim as ``paper.yaml`` states it.
 
-SPREAD_STATISTICS = ("std", "min", "max", "low", "high", "ci", "sem")
-"""Last path components that describe a spread, never compared."""
+    :param kind: ``score`` (one cell beats another), ``change`` (a change of setting costs the first agent less),
+        ``no_loss`` (a configuration loses no score against a reference) or ``exploration``.
+    :param text: the claim.
+    :param comparisons: one per env.
+    """
 
-AGENT_NAMES = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
+    kind: str
+    text: str
+    comparisons: tuple[ComparisonSpec, ...]
 
 
-NO_LOSS_CLAIMS = (
-    NoLossClaim(
-        "Not a claim of the paper: the fast preset (warm-started training plans, ebm_agent.presets.FAST_EBM) loses no "
-        "score against the paper preset online (each fast mean within or above the paper preset's 95% interval); "
-        "the library's defaults could become the fast budgets only where this holds",
-        _no_loss_pairs(),
-    ),
-)
-"""The fast preset against the paper preset (issue 33), judged before the controls (which come last)."""
+CLAIM_CELLS = {"score": ("better", "worse"), "no_loss": ("new", "reference"), "change": ("first", "other")}
+"""The ``paper.yaml`` fields naming a comparison's cells, by kind (``change``: two [before, after] pairs)."""
+
+
+def cell_keys() -> dict[str, CellKey]:
+    """Every table cell of ``paper.yaml`` by id (``<part>:<agent>[:<key>]``, ``eval.paper.parts.Cell.id``).
+
+    :return: id -> (part, agent, setting).
+    """
+    keys = {}
+    for experiment in paper_data()["experiments"]:
+        for part in experiment["parts"]:
+            for cell in part.get("cells", ()):
+                suffix = f":{cell['key']}" if cell.get("key") else ""
+                keys[f"{part['name']}:{cell['agent']}{suffix}"] = (part["name"], cell["agent"], cell["setting"])
+    return keys
+
+
+def _comparison(kind: str, entry: dict[str, Any], keys: dict[str, CellKey]) -> ComparisonSpec:
+    if kind == "exploration":
+        return ComparisonSpec(
+            entry["label"],
+            why=entry.get("why"),
+            figure=entry["figure"],
+            ebm_key=entry["ebm"],
+            random_keys=tuple(entry["random"]),
+        )
+    names: list[str] = []
+    for field in CLAIM_CELLS[kind]:
+        value = entry[field]
+        names += value if isinstance(value, list) else [value]
+    unknown = [name for name in names if name not in keys]
+    if unknown:
+        raise ValueError(f"paper.yaml: a claim names cells that do not exist: {unknown}")
+    return ComparisonSpec(entry["label"], tuple(keys[name] for name in names), entry.get("why"))
+
+
+def load_claims() -> tuple[ClaimSpec, ...]:
+    """The claims of ``paper.yaml``, in the order they are judged and reported.
+
+    :return: the specs, cells resolved to (part, agent, setting).
+    :raises ValueError: for an unknown kind or cell.
+    """
+    keys, specs = cell_keys(), []
+    for claim in paper_data()["claims"]:
+        kind = claim["kind"]
+        if kind not in (*CLAIM_CELLS, "exploration"):
+            raise ValueError(f"paper.yaml: unknown claim kind {kind!r}; known: {[*CLAIM_CELLS, 'exploration']}")
+        comparisons = tuple(_comparison(kind, entry, keys) for entry in claim["compare"])
+        specs.append(ClaimSpec(kind, claim["text"], comparisons))
+    return tuple(specs)
+
+
+CLAIMS = load_claims()
+"""Every claim, in ``paper.yaml``'s order."""
 
 
 def compare_no_loss(label: str, name: str, values: Sequence[float], other_name: str, other: Sequence[float]) -> Comparison:
@@ -286,16 +195,20 @@ def compare_no_loss(label: str, name: str, values: Sequence[float], other_name: 
         missing = [n for n, v in ((name, values), (other_name, other)) if len(v) == 0]
         return Comparison(label, MISSING, f"{' and '.join(missing)} not run yet")
     first, second = np.asarray(values, dtype=np.float64), np.asarray(other, dtype=np.float64)
-    if len(second) >= MIN_SEEDS_FOR_CI:
+    if len(second) >= stats.MIN_SEEDS_FOR_CI:
         low, high = stats.bootstrap_ci(second, stats.mean)
         reference = f"{other_name} {stats.mean(second):.2f} [95% CI {low:.2f}, {high:.2f}]"
     else:
         low = float(second.min())
-        reference = f"{other_name} {stats.mean(second):.2f} (lowest seed {low:.2f}; fewer than {MIN_SEEDS_FOR_CI} seeds)"
+        reference = f"{other_name} {stats.mean(second):.2f} (lowest seed {low:.2f}; fewer than {stats.MIN_SEEDS_FOR_CI} seeds)"
     mean = stats.mean(first)
     verdict = HOLDS if mean >= low else FAILS
     where = (
-        "above the interval" if len(second) >= MIN_SEEDS_FOR_CI and mean > high else "within" if verdict == HOLDS else "below"
+        "above the interval"
+        if len(second) >= stats.MIN_SEEDS_FOR_CI and mean > high
+        else "within"
+        if verdict == HOLDS
+        else "below"
     )
     seeds = f"{len(first)} seed{'s' if len(first) != 1 else ''}"
     return Comparison(label, verdict, f"{name} {mean:.2f} ({seeds}) vs {reference}: {where}")
@@ -351,7 +264,7 @@ def compare_seeds(
     first, second = np.asarray(values, dtype=np.float64), np.asarray(other, dtype=np.float64)
     verdict = HOLDS if stats.mean(first) > stats.mean(second) else FAILS
     evidence = f"{name} {_with_interval(first, digits)} vs {other_name} {_with_interval(second, digits)}"
-    if len(first) >= MIN_SEEDS_FOR_CI and len(second) >= MIN_SEEDS_FOR_CI:
+    if len(first) >= stats.MIN_SEEDS_FOR_CI and len(second) >= stats.MIN_SEEDS_FOR_CI:
         low_a, high_a = stats.bootstrap_ci(first, stats.mean)
         low_b, high_b = stats.bootstrap_ci(second, stats.mean)
         separate = low_a > high_b or low_b > high_a
@@ -359,7 +272,7 @@ def compare_seeds(
         if verdict == HOLDS and not separate:
             verdict = INCONCLUSIVE
     else:
-        evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds on a side, no interval"
+        evidence += f"; fewer than {stats.MIN_SEEDS_FOR_CI} seeds on a side, no interval"
     return Comparison(label, verdict, evidence)
 
 
@@ -387,7 +300,7 @@ def compare_changes(
         first, second = np.asarray(before, dtype=np.float64), np.asarray(after, dtype=np.float64)
         delta = stats.mean(second) - stats.mean(first)
         seeds = min(len(first), len(second))
-        interval = stats.bootstrap_difference_ci(first, second) if seeds >= MIN_SEEDS_FOR_CI else None
+        interval = stats.bootstrap_difference_ci(first, second) if seeds >= stats.MIN_SEEDS_FOR_CI else None
         text = f"{agent} {delta:+.2f}"
         if interval is not None:
             text += f" [95% CI {interval[0]:+.2f}, {interval[1]:+.2f}]"
@@ -403,13 +316,13 @@ def compare_changes(
         if verdict == HOLDS and not separate:
             verdict = INCONCLUSIVE
     else:
-        evidence += f"; fewer than {MIN_SEEDS_FOR_CI} seeds in a cell, no interval"
+        evidence += f"; fewer than {stats.MIN_SEEDS_FOR_CI} seeds in a cell, no interval"
     return Comparison(label, verdict, evidence)
 
 
 def _with_interval(values: np.ndarray, digits: str = ".2f") -> str:
     text = f"{stats.mean(values):{digits}}"
-    if len(values) >= MIN_SEEDS_FOR_CI:
+    if len(values) >= stats.MIN_SEEDS_FOR_CI:
         low, high = stats.bootstrap_ci(values, stats.mean)
         text += f" [95% CI {low:{digits}}, {high:{digits}}]"
     return text + f" ({len(values)} seed{'s' if len(values) != 1 else ''})"
@@ -432,50 +345,20 @@ def combine(comparisons: Sequence[Comparison]) -> str:
     return HOLDS
 
 
-def exploration_numbers(metrics: Mapping[str, Any], spec: ExplorationSpec) -> tuple[str, float, str, float] | None:
+def exploration_numbers(metrics: Mapping[str, Any], spec: ComparisonSpec) -> tuple[str, float, str, float] | None:
     """The EBM's number and the strongest random explorer's number of an exploration figure.
 
     :param metrics: the figure's metrics.
-    :param spec: where the numbers are.
-    :return: (EBM key, its value, random key, its value); ``exploration_pair``'s guess when the keys are missing.
+    :param spec: where the numbers are (an ``exploration`` comparison).
+    :return: (EBM key, its value, random key, its value), or None when the metrics lack them.
     """
     flat = _flatten(metrics)
     ours = _average(flat.get(spec.ebm_key))
-    theirs = [(key, _average(flat.get(key))) for key in spec.random_keys]
-    known = [(key, value) for key, value in theirs if value is not None]
+    known = [(key, value) for key in spec.random_keys if (value := _average(flat.get(key))) is not None]
     if ours is None or not known:
-        return exploration_pair(metrics)
+        return None
     key, value = max(known, key=lambda pair: pair[1])
     return spec.ebm_key, ours, key, value
-
-
-def exploration_pair(metrics: Mapping[str, Any]) -> tuple[str, float, str, float] | None:
-    """A guess of the EBM and random exploration numbers of a figure's metrics: keys differing by ``ebm``/``random``.
-
-    :param metrics: the figure's metrics (nested dicts allowed).
-    :return: (EBM key, its value, random key, its value), or None when no such pair exists.
-    """
-    flat = _flatten(metrics)
-    candidates = []
-    for key, value in flat.items():
-        if not re.search(r"ebm", key, flags=re.IGNORECASE) or re.search(r"timestep|transition|step", key, re.IGNORECASE):
-            continue
-        if key.rsplit("/", 1)[-1].lower() in SPREAD_STATISTICS:
-            continue
-        partner = re.sub(r"ebm", "random", key, flags=re.IGNORECASE)
-        partner = next((k for k in flat if k.lower() == partner.lower()), "")
-        ours, theirs = _average(value), _average(flat.get(partner))
-        if partner and ours is not None and theirs is not None:
-            rank = (
-                0 if re.search("coverage|occupan", key, re.IGNORECASE) else 1,
-                0 if re.search("final|mean", key, re.IGNORECASE) else 1,
-                key,
-            )
-            candidates.append((rank, key, ours, partner, theirs))
-    if not candidates:
-        return None
-    _, key, ours, partner, theirs = min(candidates)
-    return key, ours, partner, theirs
 
 
 def _flatten(metrics: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
@@ -505,40 +388,37 @@ def _average(value: Any) -> float | None:
 def evaluate_claims(
     scores: ScoreLookup, figures: FigureLookup, retired: Callable[[CellKey], int] | None = None
 ) -> list[Claim]:
-    """Judge every claim from the numbers the lookups return.
+    """Judge every claim (``CLAIMS``) from the numbers the lookups return.
 
     :param scores: per-seed scores of a table cell.
     :param figures: metrics of a figure part.
     :param retired: runs of a table cell made with earlier library defaults (default: none), named in the evidence
         of a comparison that lacks today's runs.
-    :return: the claims with their verdicts and evidence.
+    :return: the claims with their verdicts and evidence, in ``CLAIMS``' order.
     """
-    claims = [_score_claim(spec, scores, retired) for spec in SCORE_CLAIMS]
-    exploration = []
-    for spec_ in EXPLORATION_FIGURES:
-        label, part = spec_.label, spec_.part
-        metrics = figures(part)
-        pair = exploration_numbers(metrics, spec_) if metrics is not None else None
-        if metrics is None:
-            exploration.append(Comparison(label, MISSING, f"figure {part} not run yet"))
-        elif pair is None:
-            exploration.append(Comparison(label, MISSING, f"figure {part} reports no EBM / random pair of numbers"))
-        else:
-            exploration.append(_exploration_comparison(label, part, metrics, *pair))
-    claims.append(Claim(EXPLORATION_CLAIM, combine(exploration), tuple(exploration)))
-    claims += [_score_claim(spec, scores, retired) for spec in DIRECTED_CLAIMS]
-    claims += [_change_claim(spec, scores, retired) for spec in CHANGE_CLAIMS]
-    claims += [_no_loss_claim(spec, scores) for spec in NO_LOSS_CLAIMS]
-    claims += [_score_claim(spec, scores, retired) for spec in CONTROL_CLAIMS]
+    count = retired or (lambda _key: 0)
+    judge = {"score": _score, "change": _change, "no_loss": _no_loss, "exploration": _exploration}
+    claims = []
+    for spec in CLAIMS:
+        comparisons = [replace(judge[spec.kind](item, scores, figures, count), why=item.why) for item in spec.comparisons]
+        claims.append(Claim(spec.text, combine(comparisons), tuple(comparisons)))
     return claims
 
 
-def _no_loss_claim(spec: NoLossClaim, scores: ScoreLookup) -> Claim:
-    comparisons = [
-        compare_no_loss(label, f"{_name(new)} (fast preset)", scores(new), f"{_name(old)} (paper preset)", scores(old))
-        for label, new, old in spec.comparisons
-    ]
-    return Claim(spec.text, combine(comparisons), tuple(comparisons))
+def _exploration(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLookup, count: Retired) -> Comparison:
+    metrics = figures(item.figure)
+    if metrics is None:
+        return Comparison(item.label, MISSING, f"figure {item.figure} not run yet")
+    numbers = exploration_numbers(metrics, item)
+    if numbers is None:
+        keys = ", ".join((item.ebm_key, *item.random_keys))
+        return Comparison(item.label, MISSING, f"figure {item.figure} reports none of {keys}")
+    return _exploration_comparison(item.label, item.figure, metrics, *numbers)
+
+
+def _no_loss(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLookup, count: Retired) -> Comparison:
+    new, old = item.cells
+    return compare_no_loss(item.label, f"{_name(new)} (fast preset)", scores(new), f"{_name(old)} (paper preset)", scores(old))
 
 
 def per_seed_values(metrics: Mapping[str, Any], key: str) -> list[float] | None:
@@ -570,50 +450,39 @@ def _exploration_comparison(
     return Comparison(label, comparison.verdict, f"{comparison.evidence} ({part})")
 
 
-def _score_claim(spec: ScoreClaim, scores: ScoreLookup, retired: Callable[[CellKey], int] | None = None) -> Claim:
-    count = retired or (lambda _key: 0)
-    comparisons = []
-    for label, better, worse in spec.comparisons:
-        names = _name(better), _name(worse)
-        if names[0] == names[1]:  # the same agent in two settings: name the settings
-            names = f"{names[0]} ({better[2]})", f"{names[1]} ({worse[2]})"
-        counts = count(better), count(worse)
-        comparisons.append(compare_scores(label, names[0], scores(better), names[1], scores(worse), counts))
-    return Claim(spec.text, combine(comparisons), tuple(comparisons))
+def _score(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLookup, count: Retired) -> Comparison:
+    better, worse = item.cells
+    names = _name(better), _name(worse)
+    if names[0] == names[1]:  # the same agent in two settings: name the settings
+        names = f"{names[0]} ({better[2]})", f"{names[1]} ({worse[2]})"
+    return compare_scores(item.label, names[0], scores(better), names[1], scores(worse), (count(better), count(worse)))
 
 
-def _change_claim(spec: ChangeClaim, scores: ScoreLookup, retired: Callable[[CellKey], int] | None = None) -> Claim:
-    count = retired or (lambda _key: 0)
-    comparisons = []
-    for label, cells, other_cells in spec.comparisons:
-        missing = [(f"{_name(cell)} {cell[2]}", count(cell)) for cell in (*cells, *other_cells) if not len(scores(cell))]
-        if missing:
-            comparisons.append(Comparison(label, MISSING, _not_measured(missing)))
-            continue
-        comparisons.append(
-            compare_changes(
-                label,
-                _name(cells[0]),
-                (scores(cells[0]), scores(cells[1])),
-                _name(other_cells[0]),
-                (scores(other_cells[0]), scores(other_cells[1])),
-                (cells[0][2], cells[1][2]),
-            )
-        )
-    return Claim(spec.text, combine(comparisons), tuple(comparisons))
+def _change(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLookup, count: Retired) -> Comparison:
+    before, after, other_before, other_after = item.cells
+    missing = [(f"{_name(cell)} {cell[2]}", count(cell)) for cell in item.cells if not len(scores(cell))]
+    if missing:
+        return Comparison(item.label, MISSING, _not_measured(missing))
+    return compare_changes(
+        item.label,
+        _name(before),
+        (scores(before), scores(after)),
+        _name(other_before),
+        (scores(other_before), scores(other_after)),
+        (before[2], after[2]),
+    )
 
 
 def _name(key: CellKey) -> str:
-    name = AGENT_NAMES.get(key[1], key[1])
+    name = AGENT_LABELS.get(key[1], key[1])
     return f"untrained {name}" if key[2].startswith("untrained") else name
 
 
-def render_claims(claims: Sequence[Claim], reason: Callable[[str, str], str | None] | None = None) -> str:
-    """The claims as a markdown list, each comparison under its claim.
+def render_claims(claims: Sequence[Claim]) -> str:
+    """The claims as a markdown list, each comparison under its claim, with the note of why (``notes.md``) after
+    each comparison that does not hold or is inconclusive and names one.
 
     :param claims: from ``evaluate_claims``.
-    :param reason: ``(claim text, comparison label) -> what we know of why it does not hold`` (or None); asked only
-        for comparisons that do not hold or are inconclusive (``eval.paper.differences.claim_reason``).
     :return: markdown.
     """
     lines = []
@@ -621,35 +490,30 @@ def render_claims(claims: Sequence[Claim], reason: Callable[[str, str], str | No
         lines.append(f"- **{claim.text}**: {claim.verdict}")
         for comparison in claim.comparisons:
             line = f"  - {comparison.label}: {comparison.verdict} ({comparison.evidence})"
-            why = reason(claim.text, comparison.label) if reason and comparison.verdict in (FAILS, INCONCLUSIVE) else None
+            why = note(comparison.why) if comparison.why and comparison.verdict in (FAILS, INCONCLUSIVE) else None
             lines.append(f"{line}. Why: {why}" if why else line)
     return "\n".join(lines)
 
 
 __all__ = [
-    "CHANGE_CLAIMS",
-    "CONTROL_CLAIMS",
-    "DIRECTED_CLAIMS",
-    "EXPLORATION_CLAIM",
-    "EXPLORATION_FIGURES",
+    "CLAIMS",
     "FAILS",
     "HOLDS",
-    "LEARNING_CONTROL",
+    "INCONCLUSIVE",
     "MISSING",
-    "SCORE_CLAIMS",
-    "SPREAD_STATISTICS",
-    "ChangeClaim",
     "Claim",
+    "ClaimSpec",
     "Comparison",
-    "ExplorationSpec",
-    "ScoreClaim",
+    "ComparisonSpec",
+    "cell_keys",
     "combine",
     "compare_changes",
+    "compare_no_loss",
     "compare_scores",
     "compare_seeds",
     "evaluate_claims",
     "exploration_numbers",
-    "exploration_pair",
+    "load_claims",
     "per_seed_values",
     "render_claims",
 ]

@@ -16,19 +16,11 @@ from typing import Any
 
 from envs import ENV_IDS, PAPER_EVAL_KWARGS
 from eval.jobs import Job
+from eval.paper.data import paper_data
 from eval.presets import PRESET_DIR, load_preset
 
 AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
 """How agents are named in tables."""
-
-FAST_PART_SUFFIX = "_fast"
-"""Appended to a part's name for the rows made with the fast preset (``ebm_agent.presets.FAST_EBM``) instead of the
-paper preset."""
-
-FAST_VARIANT_SUFFIX = "_defaults"
-"""Appended to a variant (run folder) for the fast preset's rows. The name is historical: the fast budgets were the
-library's defaults while these runs were recorded (2026-12-05), until they measured lower on the Sawyer; a variant is
-part of a run's fingerprint, so the folders keep the name their records carry."""
 
 
 @dataclass(frozen=True)
@@ -64,33 +56,16 @@ class Scale:
     folder: str = ""
 
 
-_TINY_PLANNER = {"planner_config": {"iterations": 2, "num_samples": 8}}
+def _scale(name: str, fields: dict[str, Any]) -> Scale:
+    """A scale from its ``paper.yaml`` entry (lists become tuples)."""
+    values: dict[str, Any] = {key: tuple(value) if isinstance(value, list) else value for key, value in fields.items()}
+    if "figure_seeds" in fields:
+        values["figure_seeds"] = {figure: tuple(seeds) for figure, seeds in fields["figure_seeds"].items()}
+    return Scale(name=name, **values)
 
-SCALES: dict[str, Scale] = {
-    "paper": Scale(
-        name="paper",
-        online=50_000,
-        pretrain=100_000,
-        eval_episodes=10,
-        evaluations=5,
-        seeds=(0, 1, 2),
-        figure_seeds={"sawyer_exploration": (0, 1, 2, 3)},  # "across 4 different seeds" (paper Fig. 8)
-    ),
-    "smoke": Scale(
-        name="smoke",
-        online=40,
-        pretrain=40,
-        eval_episodes=1,
-        evaluations=2,
-        seeds=(0,),
-        env_kwargs={"max_episode_steps": 10},
-        hyperparams={"ebm": _TINY_PLANNER, "action-ff": _TINY_PLANNER, "ppo": {"n_envs": 1, "n_steps": 20, "batch_size": 10}},
-        offline_kwargs={"epochs": 1, "batch_size": 16},
-        sequential_kwargs={"epochs": 1, "batch_size": 16, "repeat": 3},
-        folder="smoke",
-    ),
-}
-"""The scales ``--scale`` accepts."""
+
+SCALES: dict[str, Scale] = {name: _scale(name, fields) for name, fields in paper_data()["scales"].items()}
+"""The scales ``--scale`` accepts (``paper.yaml``, ``scales``)."""
 
 
 @dataclass(frozen=True)
@@ -105,6 +80,9 @@ class Cell:
     :param paper_note: what the paper says instead of (or beside) a number.
     :param evaluation: the name of an extra evaluation (``Job.extra_evaluations``) whose score stands for the cell,
         None for the run's main evaluation.
+    :param key: what tells the cell from the part's other cells of the same agent (its id's last part), or None.
+    :param why: the ``notes.md`` id of why the cell differs from the paper, or None (not investigated).
+    :param part: the name of the part it belongs to.
     """
 
     setting: str
@@ -114,6 +92,14 @@ class Cell:
     paper: float | None = None
     paper_note: str = ""
     evaluation: str | None = None
+    key: str | None = None
+    why: str | None = None
+    part: str = ""
+
+    @property
+    def id(self) -> str:
+        """``<part>:<agent>[:<key>]``, by which ``paper.yaml``'s claims name the cell."""
+        return f"{self.part}:{self.agent}" + (f":{self.key}" if self.key else "")
 
     @property
     def label(self) -> str:
@@ -247,6 +233,9 @@ def make_cell(
     evaluation: str | None = None,
     paper_note: str = "",
     preset: str = "paper",
+    key: str | None = None,
+    why: str | None = None,
+    part: str = "",
 ) -> Cell:
     """A cell with one job per seed, at the context's scale.
 
@@ -266,6 +255,9 @@ def make_cell(
     :param paper_note: text beside the paper's number.
     :param preset: the agents' preset (``ebm_agent.presets``): ``"paper"`` (the original code's settings, what the
         reproduction reports the paper's tables with) or ``""`` (the library's defaults, the rows beside them).
+    :param key: see :class:`Cell`.
+    :param why: see :class:`Cell`.
+    :param part: see :class:`Cell`.
     :return: the cell.
     """
     scale = context.scale
@@ -307,7 +299,7 @@ def make_cell(
         )
         for seed in context.seeds_for()
     )
-    return Cell(setting, env, agent, jobs, paper, paper_note, evaluation)
+    return Cell(setting, env, agent, jobs, paper, paper_note, evaluation, key, why, part)
 
 
 def table_part(context: Context, experiment: str, name: str, cells: Sequence[Cell]) -> Part:

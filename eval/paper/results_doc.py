@@ -33,7 +33,7 @@ from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
 from eval.jobs import Job, to_plain
 from eval.paper.claims import evaluate_claims, render_claims
-from eval.paper.differences import claim_reason, find_differences, render_differences
+from eval.paper.differences import find_differences, render_differences
 from eval.paper.estimates import format_duration
 from eval.paper.experiments import EXPERIMENTS, make_context
 from eval.paper.figures.common import figure_complete, figure_seeds_kept, figure_state
@@ -49,8 +49,6 @@ from eval.provenance import (
     read_sessions,
 )
 from eval.run import evaluation_env_kwargs
-
-MIN_SEEDS_FOR_IQM = 3
 
 
 @dataclass
@@ -125,7 +123,7 @@ def _pm(values: np.ndarray) -> str:
 
 
 def _iqm(values: np.ndarray) -> str:
-    if len(values) < MIN_SEEDS_FOR_IQM:
+    if len(values) < stats.MIN_SEEDS_FOR_CI:
         return "-"
     low, high = stats.bootstrap_ci(values, stats.iqm)
     return f"{stats.iqm(values):.2f} [{low:.2f}, {high:.2f}]"
@@ -451,12 +449,12 @@ def render_results(
         "Score: the undiscounted sum of the env's per-step rewards over one deterministic evaluation episode (the "
         f"paper's metric), {SCALES[scale].eval_episodes} evaluation episode(s) per run; ± is the population std over "
         "seeds of the per-seed mean scores; IQM [95% CI] (stratified bootstrap over seeds) from "
-        f"{MIN_SEEDS_FOR_IQM} seeds on. "
+        f"{stats.MIN_SEEDS_FOR_CI} seeds on. "
         "The paper reports single numbers without seeds or spread.",
         "",
         "## Claims (judged from the numbers below)",
         "",
-        render_claims(claims, claim_reason),
+        render_claims(claims),
         "",
         *render_differences(find_differences(judged)),
     ]

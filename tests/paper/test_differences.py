@@ -1,15 +1,23 @@
-"""The 'where we differ from the paper' section: computed from the numbers, explained from eval/paper/differences.py."""
+"""The 'where we differ from the paper' section: computed from the numbers, explained from eval/paper/notes.md."""
 
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from eval.paper.differences import explain, find_differences, render_differences
+from eval.paper.data import NOT_INVESTIGATED, note, notes, paper_data
+from eval.paper.differences import find_differences, render_differences
+from eval.paper.experiments import build_parts, make_context
 from eval.paper.parts import Cell
 
 
-def _cell(agent: str = "ebm", paper: float | None = -20.0) -> Cell:
-    return Cell("online", "maze", agent, (), paper)
+def _cell(agent: str = "ebm", paper: float | None = -20.0, why: str | None = "maze-first-wall") -> Cell:
+    return Cell("online", "maze", agent, (), paper, why=why)
+
+
+def _paper_cells(tmp_path) -> dict[str, Cell]:
+    parts = build_parts(["all"], make_context("paper", str(tmp_path)))
+    return {cell.id: cell for part in parts for cell in part.cells}
 
 
 def test_a_cell_differs_only_when_the_paper_lies_outside_our_interval():
@@ -23,33 +31,30 @@ def test_a_cell_differs_only_when_the_paper_lies_outside_our_interval():
     assert found[0].low <= found[0].mean <= found[0].high and found[0].seeds == 3
 
 
-def test_explanations_match_by_part_and_agent_and_say_so_when_unknown():
-    assert "first wall" in explain("table1/maze/pretrained", "action-ff")
-    assert "untrained agent" in explain("table1/particle/online", "ebm")
-    assert "off by one" in explain("table1/particle/online", "action-ff")
-    assert "change of state" in explain("table1/reacher/pretrained", "action-ff")
-    assert "no inverse dynamics" in explain("table2/sawyer/online_fixed", "action-ff")
-    assert "no inverse dynamics" in explain("fixed_on_variable/sawyer", "action-ff")
-    assert "residual=false" in explain("table2/sawyer/pretrained_random", "action-ff")
-    assert "matches the planned finger" in explain("inverse_dynamics/sawyer", "ebm")
-    assert "left the finger's move unlearned" in explain("table2/sawyer/pretrained_directed", "action-ff")
-    assert "left the finger's move unlearned" in explain("table2/sawyer/pretrained_directed_sequential", "action-ff")
-    assert explain("table2/sawyer/pretrained_random", "ppo") == "not investigated yet."
+def test_each_cell_names_its_note_and_an_unnamed_one_says_so(tmp_path):
+    cells = _paper_cells(tmp_path)
+    assert "first wall" in note(cells["table1/maze/pretrained:action-ff"].why)
+    assert "untrained agent" in note(cells["table1/particle/online:ebm"].why)
+    assert "off by one" in note(cells["table1/particle/online:action-ff"].why)
+    assert "change of state" in note(cells["table1/reacher/pretrained:action-ff"].why)
+    assert "no inverse dynamics" in note(cells["table2/sawyer/online_fixed:action-ff"].why)
+    assert "residual=false" in note(cells["table2/sawyer/pretrained_random:action-ff"].why)
+    assert "left the finger's move unlearned" in note(cells["table2/sawyer/pretrained_directed_sequential:action-ff"].why)
+    assert "learned inverse model fails" in note(cells["inverse_dynamics/sawyer:ebm:rls"].why)
+    assert "matches the planned finger" in note(cells["inverse_dynamics/sawyer:ebm:ground_truth"].why)
+    assert note(None) == NOT_INVESTIGATED
 
 
-def test_a_setting_pattern_picks_the_rows_of_a_part_that_differ_in_more_than_the_agent():
-    assert "learned inverse model fails" in explain("inverse_dynamics/sawyer", "ebm", "RLS")
-    assert "matches the planned finger" in explain("inverse_dynamics/sawyer", "ebm", "ground truth")
-    rls = Cell("RLS", "sawyer", "ebm", (), -4694.0)
-    ground_truth = Cell("ground truth", "sawyer", "ebm", (), -3782.0)
-    found = find_differences(
-        [
-            ("inverse_dynamics/sawyer", ground_truth, np.array([-280.0, -270.0, -290.0])),
-            ("inverse_dynamics/sawyer", rls, np.array([-13000.0, -12000.0, -14000.0])),
-        ]
-    )
-    assert ["matches the planned finger" in d.explanation for d in found] == [True, False]
-    assert "learned inverse model fails" in found[1].explanation
+def test_every_note_named_in_paper_yaml_exists_and_every_note_is_named():
+    named = set()
+    for experiment in paper_data()["experiments"]:
+        for part in experiment["parts"]:
+            named |= {cell["why"] for cell in part.get("cells", ()) if "why" in cell}
+    for claim in paper_data()["claims"]:
+        named |= {comparison["why"] for comparison in claim["compare"] if "why" in comparison}
+    assert named == set(notes())
+    with pytest.raises(KeyError, match="does not have"):
+        note("no-such-note")
 
 
 def test_the_section_lists_each_difference_with_its_reason():
@@ -59,13 +64,15 @@ def test_the_section_lists_each_difference_with_its_reason():
     assert "**table1/maze/online, EBM** (online): ours -1200.00" in text and "worse than the paper's -20" in text
     assert "Why: Our agents reach the first wall" in text
     assert "No finished cell differs" in "\n".join(render_differences([]))
+    unexplained = find_differences([("table1/maze/online", _cell(why=None), np.array([-1200.0, -1210.0, -1190.0]))])
+    assert "Why: not investigated yet." in "\n".join(render_differences(unexplained))
 
 
 def test_cells_with_one_reason_share_it_and_the_reason_is_written_once():
     scores = np.array([-1200.0, -1210.0, -1190.0])
     cells = [
         ("table1/maze/pretrained", _cell("ebm"), scores),
-        ("table1/particle/online", _cell("action-ff"), np.array([-5.0, -5.5, -4.8])),
+        ("table1/particle/online", _cell("action-ff", why="particle-action-ff-original-bug"), np.array([-5.0, -5.5, -4.8])),
         ("table1/maze/online", _cell("action-ff"), scores),
     ]
     text = "\n".join(render_differences(find_differences(cells)))

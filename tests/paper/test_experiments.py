@@ -63,11 +63,13 @@ def test_paper_numbers_sit_beside_the_cells(tmp_path):
     assert cells[("inverse_dynamics/sawyer", "ebm", "ground truth")].paper == -3782
     assert cells[("inverse_dynamics/sawyer", "ebm", "RLS")].paper == -4694
     assert cells[("fixed_on_variable/sawyer", "ebm", "trained fixed, evaluated variable")].paper == -4547
-    from eval.paper.claims import CONTROL_CLAIMS, SCORE_CLAIMS
+    from eval.paper.claims import CLAIMS, cell_keys
 
-    for claim in SCORE_CLAIMS + CONTROL_CLAIMS:  # every claim names cells that exist
-        for _label, better, worse in claim.comparisons:
-            assert better in cells and worse in cells
+    for claim in CLAIMS:  # every claim names cells that exist
+        for comparison in claim.comparisons:
+            assert all(cell in cells for cell in comparison.cells)
+    ids = {c.id: (p.name, c.agent, c.setting) for p in paper_parts(tmp_path) for c in p.cells}
+    assert ids == cell_keys()  # a cell's id in paper.yaml is the one its Cell carries
     obstacle = next(p for p in paper_parts(tmp_path, ["obstacle"]))
     assert obstacle.paper == {"EBM": -61.94, "Action FF": -81.24}
 

@@ -22,6 +22,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 
 from ebm_agent.checkpoint_files import atomic_path
+from eval.paper.data import figure_entry, paper_data
 from eval.paper.parts import Part
 from eval.provenance import agent_defaults_digest, read_json_dict, read_provenance
 
@@ -35,11 +36,6 @@ import envs  # noqa: F401  registers the ebm/ ids
 from ebm_agent import EBMPlannerAgent, collect_random_transitions
 from ebm_agent.presets import PAPER_EBM, merge_settings
 from eval.paper.records import SEED_FOLDER
-
-PAPER_SCORES: dict[str, dict[str, float]] = {
-    "obstacle_generalisation": {"ebm": -61.94, "action_ff": -81.24},
-}
-"""Numbers quoted in the paper, shown beside ours (labelled as the paper's), never used in a computation."""
 
 
 @dataclass
@@ -134,41 +130,14 @@ class FigureBudget:
     ff_planner: dict[str, Any] = field(default_factory=dict)
 
 
-SCALES: dict[str, FigureBudget] = {
-    "paper": FigureBudget(
-        online_timesteps=50_000,
-        pretrain_transitions=100_000,
-        pretrain_epochs=10,
-        eval_episodes=10,
-        maze_timesteps=50_000,
-        sawyer_ebm_timesteps=50_000,
-        sawyer_random_timesteps=250_000,
-        curve_points=20,
-        energy_snapshots=4,
-        energy_resolution=300,
-        plan_samples=64,
-        diversity_horizons=(10, 20, 40),
-        reacher_horizon=20,
-    ),
-    "smoke": FigureBudget(
-        online_timesteps=48,
-        pretrain_transitions=256,
-        pretrain_epochs=1,
-        eval_episodes=1,
-        maze_timesteps=64,
-        sawyer_ebm_timesteps=16,
-        sawyer_random_timesteps=128,
-        curve_points=4,
-        energy_snapshots=2,
-        energy_resolution=24,
-        plan_samples=8,
-        diversity_horizons=(10, 20),
-        reacher_horizon=12,
-        planner={"iterations": 3, "num_samples": 12},
-        ff_planner={"iterations": 3, "num_samples": 12},
-    ),
-}
-"""Budgets by scale: ``"paper"`` reproduces the paper's, ``"smoke"`` runs in seconds."""
+def _budget(fields: dict[str, Any]) -> FigureBudget:
+    values: dict[str, Any] = {key: tuple(value) if isinstance(value, list) else value for key, value in fields.items()}
+    return FigureBudget(**values)
+
+
+SCALES: dict[str, FigureBudget] = {name: _budget(fields) for name, fields in paper_data()["figure_budgets"].items()}
+"""Budgets by scale (``paper.yaml``, ``figure_budgets``): ``"paper"`` reproduces the paper's, ``"smoke"`` runs in
+seconds."""
 
 
 def budget_for(scale: str) -> FigureBudget:
@@ -196,10 +165,6 @@ def check_seeds(seeds: Sequence[int]) -> list[int]:
     return [int(s) for s in values]
 
 
-EXPERIMENT_NAMES: dict[str, str] = {"obstacle_generalisation": "obstacle"}
-"""Figure name -> its ``ebm-eval --experiment`` name where they differ (eval/paper/experiments.py)."""
-
-
 def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     """The ``ebm-eval`` command line that reruns one figure experiment.
 
@@ -208,7 +173,7 @@ def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     :param seeds: its seeds.
     :return: the command.
     """
-    experiment = EXPERIMENT_NAMES.get(name, name)
+    experiment = figure_entry(name)[0]
     command = f"ebm-eval --experiment {experiment} --seeds {' '.join(str(s) for s in seeds)}"
     return command if scale == "paper" else f"{command} --scale {scale}"
 
@@ -229,16 +194,13 @@ def figure_defaults_digest(agents: Sequence[str] = ("ebm", "action-ff"), env_id:
     return hashlib.sha256(parts.encode()).hexdigest()[:16]
 
 
-FIGURE_AGENTS: dict[str, tuple[tuple[str, ...], str]] = {
-    "obstacle_generalisation": (("ebm", "action-ff"), "ebm/Particle-v0"),
-    "plan_diversity": (("ebm",), "ebm/Particle-v0"),
-    "reacher_directions": (("ebm",), "ebm/Reacher-v0"),
-    "maze_exploration": (("ebm",), "ebm/Maze-v0"),
-    "sawyer_exploration": (("ebm",), "ebm/SawyerReach-v0"),
-    "energy_maps": (("ebm",), "ebm/Particle-v0"),
-}
-"""Figure name -> (the agents it trains, the env whose defaults stand for them): what :func:`figure_digest` hashes.
-Energy maps trains on the particle and the maze; its seeds have always recorded the particle's EBM digest."""
+def paper_numbers(figure: str) -> dict[str, float]:
+    """The paper's numbers a figure shows beside ours (``paper.yaml``), never used in a computation.
+
+    :param figure: a key of ``eval.paper.figures.FIGURES``.
+    :return: label -> number (empty where the paper gives none).
+    """
+    return dict(figure_entry(figure)[1].get("paper") or {})
 
 
 def figure_digest(figure: str) -> str | None:
@@ -248,12 +210,16 @@ def figure_digest(figure: str) -> str | None:
     under other defaults as not finished, so that ``ebm-eval --experiment`` reruns it and the report says so.
 
     :param figure: a key of ``eval.paper.figures.FIGURES``.
-    :return: 16 hex digits, or None for a figure that declares no agents (its results are taken as they are).
+    :return: 16 hex digits, or None for a figure ``paper.yaml`` does not list with its agents (its results are
+        taken as they are).
     """
-    if figure not in FIGURE_AGENTS:
+    try:
+        part = figure_entry(figure)[1]
+    except KeyError:
         return None
-    agents, env_id = FIGURE_AGENTS[figure]
-    return figure_defaults_digest(agents, env_id)
+    if not part.get("agents"):
+        return None
+    return figure_defaults_digest(tuple(part["agents"]), part["env"])
 
 
 def seed_result_path(out_dir: Path, figure: str, seed: int) -> Path:
@@ -500,9 +466,6 @@ def _current_seed_files(folder: Path, figure: str) -> list[Path]:
 
 
 __all__ = [
-    "EXPERIMENT_NAMES",
-    "FIGURE_AGENTS",
-    "PAPER_SCORES",
     "SCALES",
     "SEED_FOLDER",
     "FigureBudget",
@@ -516,6 +479,7 @@ __all__ = [
     "figure_seeds_kept",
     "figure_state",
     "markdown_table",
+    "paper_numbers",
     "pretrained_ebm",
     "recorded_figure_digests",
     "reproduce_command",

@@ -37,13 +37,13 @@ from ebm_agent.presets import PAPER_ACTION_FF, merge_settings
 from envs.particle import ParticleEnv
 from eval.anchors import compute_anchors
 from eval.paper.figures.common import (
-    PAPER_SCORES,
     FigureResult,
     budget_for,
     build_ebm,
     check_seeds,
     figure_digest,
     markdown_table,
+    paper_numbers,
     reproduce_command,
     run_episode,
     save_png,
@@ -127,6 +127,7 @@ def obstacle_generalisation(
             if seed == seeds[0]:
                 paths[method] = np.asarray(measured["paths"][method], dtype=np.float64)
     anchors = compute_anchors("ebm/Particle-v0", eval_kwargs, seed=0)
+    paper = paper_numbers("obstacle_generalisation")
     metrics = {
         "box": list(box),
         "start": list(OBSTACLE_START),
@@ -145,7 +146,7 @@ def obstacle_generalisation(
             }
             for m in METHODS
         },
-        "paper": PAPER_SCORES["obstacle_generalisation"],
+        "paper": {method: paper[label] for method, label in (("ebm", "EBM"), ("action_ff", "Action FF"))},
     }
     png = _plot_paths(paths, box, out_dir / "obstacle_paths.png")
     result = FigureResult(

@@ -1,4 +1,4 @@
-"""scripts/probe.py: one experiment cell with the agent's settings changed, in its own folder."""
+"""python -m eval.paper.probe: one experiment cell with the agent's settings changed, in its own folder."""
 
 from __future__ import annotations
 
@@ -6,10 +6,12 @@ import json
 
 import pytest
 
+import eval.paper.probe as cell_probe
+
 
 @pytest.fixture(scope="module")
-def probe(load_script):
-    return load_script("probe")
+def probe():
+    return cell_probe
 
 
 def test_a_probe_runs_the_cell_with_the_change_into_its_own_folder(probe, tmp_path, capsys):
@@ -36,8 +38,8 @@ def test_an_unknown_part_is_a_usage_error(probe, tmp_path, capsys):
     assert stop.value.code == 2 and "unknown experiment" in capsys.readouterr().err
 
 
-def test_datasets_of_another_results_folder_are_linked_once_and_never_over_a_folder(load_script, tmp_path):
-    script = load_script("probe")
+def test_datasets_of_another_results_folder_are_linked_once_and_never_over_a_folder(tmp_path):
+    script = cell_probe
     source = tmp_path / "results" / "datasets"
     (source / "sawyer").mkdir(parents=True)
     (source / "sawyer" / "directed_n100000_s0_x.npz").write_bytes(b"data")

@@ -1,10 +1,11 @@
-"""Probe: one cell of a paper experiment with some of the agent's settings changed, scored as the experiment scores it.
+"""``python -m eval.paper.probe``: one cell of a paper experiment with some of the agent's settings changed, scored as
+the experiment scores it.
 
 Usage:
-    python scripts/probe.py table1/particle/pretrained action-ff residual=true --seeds 0 1 2
-    python scripts/probe.py table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
-    python scripts/probe.py table1/reacher/pretrained ebm --env inverse_angle_weight=30 --seeds 0
-    python scripts/probe.py table2/sawyer/pretrained_directed action-ff standardize_outputs=false --seeds 0 \
+    python -m eval.paper.probe table1/particle/pretrained action-ff residual=true --seeds 0 1 2
+    python -m eval.paper.probe table1/reacher/online ebm "cost={goal_weight: 0.1}" --seeds 0
+    python -m eval.paper.probe table1/reacher/pretrained ebm --env inverse_angle_weight=30 --seeds 0
+    python -m eval.paper.probe table2/sawyer/pretrained_directed action-ff standardize_outputs=false --seeds 0 \
         --datasets runs/results/datasets
 
 Runs the jobs of the cell (``ebm-eval --experiment <experiment> --part <part>``, agent ``AGENT``) with the given
@@ -62,7 +63,7 @@ def main(argv: list[str] | None = None) -> list[float]:
     :param argv: the arguments (default: the command line's).
     :return: each seed's mean score.
     """
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog="python -m eval.paper.probe", description=__doc__.splitlines()[0])
     parser.add_argument("part", help="a part of a paper experiment, e.g. table1/particle/pretrained")
     parser.add_argument("agent", help="the cell's agent: ebm or action-ff")
     parser.add_argument("changes", nargs="*", type=parse_change, help="KEY=VALUE agent keyword arguments")
