@@ -15,6 +15,7 @@ import shlex
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -161,16 +162,33 @@ def _optional(value: float | None, fmt: str = ".2f") -> str:
     return "-" if value is None else format(value, fmt)
 
 
+def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]], missing: str = "-") -> str:
+    """A markdown table: the one writer of the harness's and the paper's tables.
+
+    :param header: column titles.
+    :param rows: the cells; a float gets 2 decimals, None becomes ``missing``, anything else its ``str``.
+    :param missing: what stands for None.
+    :return: the table, without a final newline.
+    """
+
+    def cell(value: Any) -> str:
+        if value is None:
+            return missing
+        return f"{value:.2f}" if isinstance(value, float) else str(value)
+
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(cell(value) for value in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
 def results_table(summaries: Sequence[AgentSummary]) -> str:
     """The comparison table in markdown.
 
     :param summaries: from ``summarize``.
     :return: a markdown table, one row per env x agent.
     """
-    lines = [
-        "| env | agent | seeds | score (over seeds) | score (over episodes) | IQM [95% CI] | success | steps used / budget |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+    header = ["env", "agent", "seeds", "score (over seeds)", "score (over episodes)", "IQM [95% CI]", "success"]
+    rows = []
     for s in summaries:
         unfinished = [f"{len(s.failed)} failed"] * bool(s.failed) + [f"{len(s.stopped)} stopped"] * bool(s.stopped)
         seeds = str(len(s.seeds)) + (f" ({', '.join(unfinished)})" if unfinished else "")
@@ -181,28 +199,27 @@ def results_table(summaries: Sequence[AgentSummary]) -> str:
             steps = f"{s.steps_used[0]} / {s.budget}"
         else:
             steps = f"{s.steps_used[0]}-{s.steps_used[1]} / {s.budget}"
-        lines.append(
-            f"| {s.env} | {s.agent} | {seeds} | {_pm(s.seed_mean, s.seed_std)} | {_pm(s.episode_mean, s.episode_std)} "
-            f"| {iqm} | {_optional(s.success_rate)} | {steps} |"
-        )
-    return "\n".join(lines)
+        seed_score, episode_score = _pm(s.seed_mean, s.seed_std), _pm(s.episode_mean, s.episode_std)
+        rows.append([s.env, s.agent, seeds, seed_score, episode_score, iqm, _optional(s.success_rate), steps])
+    return markdown_table([*header, "steps used / budget"], rows)
 
 
-def anchors_table(anchors: dict[str, EnvAnchors | None]) -> str:
+def anchors_table(anchors: dict[str, EnvAnchors | None], first: str = "env") -> str:
     """The sanity anchors in markdown.
 
-    :param anchors: env short name -> anchors (None where they could not be computed).
+    :param anchors: env label -> anchors (None where they could not be computed).
+    :param first: the first column's title.
     :return: a markdown table, one row per env.
     """
-    lines = ["| env | optimum | random policy | standing still |", "|---|---|---|---|"]
+    rows: list[list[Any]] = []
     for env, anchor in anchors.items():
         if anchor is None:
-            lines.append(f"| {env} | - | - | - |")
+            rows.append([env, None, None, None])
             continue
-        optimum = "-" if anchor.optimum is None else f"{anchor.optimum:.2f} ({anchor.optimum_source})"
+        optimum = None if anchor.optimum is None else f"{anchor.optimum:.2f} ({anchor.optimum_source})"
         random = f"{anchor.random_mean:.2f} ± {anchor.random_std:.2f} ({anchor.random_episodes} episodes)"
-        lines.append(f"| {env} | {optimum} | {random} | {anchor.still_score:.2f} |")
-    return "\n".join(lines)
+        rows.append([env, optimum, random, f"{anchor.still_score:.2f}"])
+    return markdown_table([first, "optimum", "random policy", "standing still"], rows)
 
 
 def render_markdown(
@@ -266,6 +283,7 @@ __all__ = [
     "CSV_COLUMNS",
     "AgentSummary",
     "anchors_table",
+    "markdown_table",
     "render_markdown",
     "results_table",
     "summarize",

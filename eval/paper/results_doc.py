@@ -48,6 +48,7 @@ from eval.provenance import (
     read_provenance,
     read_sessions,
 )
+from eval.report import anchors_table, markdown_table
 from eval.run import evaluation_env_kwargs
 
 
@@ -140,10 +141,7 @@ def cells_table(results: Sequence[CellResult]) -> str:
     :param results: the cells' results.
     :return: one row per cell: ours, seeds, IQM [95% CI], success, paper.
     """
-    lines = [
-        "| setting | env | agent | ours: mean ± std over seeds | seeds | IQM [95% CI] | success | paper |",
-        "|---|---|---|---|---|---|---|---|",
-    ]
+    rows = []
     for result in results:
         cell, scores = result.cell, result.scores
         ours = _pm(scores) if len(scores) else "not run yet"
@@ -153,10 +151,9 @@ def cells_table(results: Sequence[CellResult]) -> str:
         successes = [float(m["success_rate"]) for _, m in result.runs if m.get("success_rate") is not None]
         successes = successes if cell.evaluation is None else []
         success = f"{np.mean(successes):.2f}" if successes else "-"
-        lines.append(
-            f"| {cell.setting} | {cell.env} | {cell.label} | {ours} | {seeds} | {_iqm(scores)} | {success} | {_paper(cell)} |"
-        )
-    return "\n".join(lines)
+        rows.append([cell.setting, cell.env, cell.label, ours, seeds, _iqm(scores), success, _paper(cell)])
+    header = ["setting", "env", "agent", "ours: mean ± std over seeds", "seeds", "IQM [95% CI]", "success", "paper"]
+    return markdown_table(header, rows)
 
 
 @dataclass
@@ -219,21 +216,21 @@ def parts_table(parts: Sequence[Part], statuses: Sequence[PartStatus]) -> str:
     :param statuses: their statuses.
     :return: a markdown table.
     """
-    lines = ["| part | status | command | machine | finished | wall time (sum of its runs) |", "|---|---|---|---|---|---|"]
+    rows: list[list[str]] = []
     for part, status in zip(parts, statuses):
         if status.done == 0:
-            lines.append(f"| {part.name} | not run yet | `{part.command()}` | | | |")
+            rows.append([part.name, "not run yet", f"`{part.command()}`", "", "", ""])
             continue
         state = "complete" if status.done == status.total else f"partial ({status.done}/{status.total}); to finish:"
         commands = sorted(set(status.commands)) if status.done == status.total else [part.command()]
         dates = sorted(d[:10] for d in status.finished if d)
         when = (dates[0] if dates[0] == dates[-1] else f"{dates[0]} to {dates[-1]}") if dates else "-"
         untimed = f" + {status.untimed_seeds} earlier seed(s), time not recorded" if status.untimed_seeds else ""
-        lines.append(
-            f"| {part.name} | {state} | {'<br>'.join(f'`{c}`' for c in commands)} | "
-            f"{'<br>'.join(sorted(set(status.machines)))} | {when} | {format_duration(status.wall_time_s)}{untimed} |"
-        )
-    return "\n".join(lines)
+        machines = "<br>".join(sorted(set(status.machines)))
+        wall = f"{format_duration(status.wall_time_s)}{untimed}"
+        rows.append([part.name, state, "<br>".join(f"`{c}`" for c in commands), machines, when, wall])
+    header = ["part", "status", "command", "machine", "finished", "wall time (sum of its runs)"]
+    return markdown_table(header, rows)
 
 
 def _anchor_key(job: Job, evaluation: dict[str, Any]) -> str:
@@ -279,15 +276,7 @@ def anchors_rows(results: Sequence[CellResult], out_dir: Path) -> list[tuple[str
 
 
 def _anchors_md(rows: Sequence[tuple[str, EnvAnchors | None]]) -> str:
-    lines = ["| evaluation env | optimum | random policy | standing still |", "|---|---|---|---|"]
-    for label, anchor in rows:
-        if anchor is None:
-            lines.append(f"| {label} | - | - | - |")
-            continue
-        optimum = "-" if anchor.optimum is None else f"{anchor.optimum:.2f} ({anchor.optimum_source})"
-        random = f"{anchor.random_mean:.2f} ± {anchor.random_std:.2f} ({anchor.random_episodes} episodes)"
-        lines.append(f"| {label} | {optimum} | {random} | {anchor.still_score:.2f} |")
-    return "\n".join(lines)
+    return anchors_table(dict(rows), first="evaluation env")
 
 
 def learning_curves(part: Part, results: Sequence[CellResult], figures_dir: Path) -> Path | None:

@@ -152,3 +152,11 @@ def test_load_curve_rejects_a_file_not_in_sb3_format(tmp_path):
     np.savez(tmp_path / "bad.npz", timesteps=np.array([1, 2, 3]), results=np.zeros((2, 4)), ep_lengths=np.zeros((2, 4)))
     with pytest.raises(ValueError, match="SB3's format"):
         load_curve(tmp_path / "bad.npz")
+
+
+def test_one_markdown_table_writer_formats_every_table():
+    from eval.report import markdown_table
+
+    table = markdown_table(["a", "b", "c"], [[1.234, None, "x"], [2, 0.5, ""]], missing="—")
+    assert table.splitlines() == ["| a | b | c |", "|---|---|---|", "| 1.23 | — | x |", "| 2 | 0.50 |  |"]
+    assert markdown_table(["a"], [[None]]).splitlines()[-1] == "| - |"

@@ -22,6 +22,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 
 from ebm_agent.checkpoint_files import atomic_path
+from eval import report
 from eval.paper.data import figure_entry, paper_data
 from eval.paper.parts import Part
 from eval.provenance import agent_defaults_digest, read_json_dict, read_provenance
@@ -343,23 +344,13 @@ def save_png(figure: Figure, path: Path) -> Path:
 
 
 def markdown_table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """A markdown table; floats get 2 decimals, None becomes an em dash.
+    """A figure's markdown table (``eval.report.markdown_table``; None is an em dash).
 
     :param header: column titles.
     :param rows: the cells.
     :return: the table.
     """
-
-    def cell(value: Any) -> str:
-        if value is None:
-            return "—"
-        if isinstance(value, float):
-            return f"{value:.2f}"
-        return str(value)
-
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
-    return "\n".join(lines)
+    return report.markdown_table(header, rows, missing="—")
 
 
 def to_jsonable(value: Any) -> Any:
