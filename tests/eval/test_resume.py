@@ -97,6 +97,7 @@ def test_sigterm_mid_run_checkpoints_that_step_and_the_rerun_ends_as_an_uninterr
     assert whole.ok, whole.error
 
     job = _job(tmp_path / "cut")
+    before = signal.getsignal(signal.SIGTERM)  # SIG_DFL, or another test's (ray.init installs one for the process)
     with monkeypatch.context() as patch:
         signal_training_after(patch, "ebm", 150, signal.SIGTERM)
         stopped = run_job(job)
@@ -106,7 +107,7 @@ def test_sigterm_mid_run_checkpoints_that_step_and_the_rerun_ends_as_an_uninterr
     step = json.loads((job.run_dir / RESUME_FOLDER / STATE_FILE).read_text())["num_timesteps"]
     assert 150 < step < 160 and step % 110  # the step where the signal came, not the last evaluation's (110)
     assert f"at {step}/300 transitions" in stopped.error
-    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL  # the handler is gone with the learn call
+    assert signal.getsignal(signal.SIGTERM) == before  # the run's handler is gone with the learn call
 
     resumed = run_job(job)
     assert resumed.ok, resumed.error
