@@ -43,7 +43,6 @@ from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
@@ -52,8 +51,8 @@ from ebm_agent import EBMPlannerAgent
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from eval.jobs import Job, to_plain
-from eval.resume import read_checkpoint_files, write_checkpoint_files
-from eval.stop import CheckpointOnStop, raise_if_stopped, stop_at_next_step
+from eval.resume import ResumeCheckpoint, read_checkpoint_files, write_checkpoint_files
+from eval.stop import raise_if_stopped, stop_at_next_step
 
 if TYPE_CHECKING:
     from stable_baselines3.common.base_class import BaseAlgorithm
@@ -242,22 +241,22 @@ def collect_directed_transitions(
         agent = EBMPlannerAgent.load_checkpoint(agent_path, env=vec_env, device=device, force_reset=False)
         time_before = float(state.get("collect_time_s", 0.0))
         resumed_at = [*state.get("resumed_at", []), int(state["num_timesteps"])]
-    checkpoint = None
-    if checkpoint_dir is not None:
-        checkpoint = CollectionCheckpoint(
-            checkpoint_dir, checkpoint_every, num_transitions, recorder, identity, time_before, resumed_at
-        )
     start = time.perf_counter()
     learn = functools.partial(
         agent.learn, total_timesteps=num_transitions - int(agent.num_timesteps), reset_num_timesteps=found is None
     )
+
+    def write(elapsed_s: float) -> None:
+        assert checkpoint_dir is not None
+        state = {**identity, "collect_time_s": time_before + elapsed_s, "resumed_at": resumed_at}
+        write_checkpoint_files(checkpoint_dir, agent, {"env": agent.get_env(), "recorder": recorder}, state)
+
     try:
-        if checkpoint is None:
+        if checkpoint_dir is None:
             learn()
         else:
-            collection = checkpoint
             with stop_at_next_step() as flag:  # SIGTERM, Ctrl-C: a checkpoint at the next step, then stop
-                learn(callback=[collection, CheckpointOnStop(flag, collection.save, lambda: collection.saved_at)])
+                learn(callback=ResumeCheckpoint(write, num_transitions, every=checkpoint_every, flag=flag))
             what = f"directed collection of {num_transitions:,} {env_id} transitions (seed {seed})"
             raise_if_stopped(flag, int(agent.num_timesteps), num_transitions, what, checkpoint_dir)
     finally:
@@ -273,62 +272,6 @@ def collect_directed_transitions(
         "resumed_at": resumed_at,
     }
     return recorder.dataset(info=to_plain(info))
-
-
-class CollectionCheckpoint(BaseCallback):
-    """Checkpoints a directed collection every ``every`` transitions (none at the end: the dataset is then saved).
-
-    :param folder: the checkpoint folder.
-    :param every: transitions between two checkpoints.
-    :param total: the collection's size.
-    :param recorder: the recorder inside the agent's env (pickled with it, so the two stay one object).
-    :param identity: what a checkpoint must match to be continued (env, size, seed, agent settings).
-    :param time_before: time spent collecting by earlier processes.
-    :param resumed_at: transitions at which earlier processes resumed.
-    """
-
-    def __init__(
-        self,
-        folder: Path,
-        every: int,
-        total: int,
-        recorder: TransitionRecorder,
-        identity: dict[str, Any],
-        time_before: float = 0.0,
-        resumed_at: list[int] | None = None,
-    ) -> None:
-        super().__init__()
-        self.folder, self.every, self.total = Path(folder), int(every), int(total)
-        self.recorder, self.identity = recorder, dict(identity)
-        self.time_before, self.resumed_at = float(time_before), list(resumed_at or [])
-        self.saved_at: int | None = None
-        self._start = time.perf_counter()
-        self._next = self.every
-
-    def _init_callback(self) -> None:
-        self._start = time.perf_counter()
-        # The model's count: the callback's own is 0 until its first step, which for a resumed collection would
-        # write a needless checkpoint one step after the one it resumed from.
-        self._next = (int(self.model.num_timesteps) // self.every + 1) * self.every
-
-    def _on_step(self) -> bool:
-        if self.num_timesteps >= self._next:
-            self.save()
-        return True
-
-    def save(self) -> None:
-        """Write the checkpoint at the agent's current step (nothing once the collection is complete).
-
-        Called every ``every`` transitions, and by ``eval.stop.CheckpointOnStop`` where a stop was asked for.
-        """
-
-        steps = int(self.model.num_timesteps)
-        if steps < self.total:
-            spent = self.time_before + time.perf_counter() - self._start
-            state = {**self.identity, "collect_time_s": spent, "resumed_at": self.resumed_at}
-            write_checkpoint_files(self.folder, self.model, {"env": self.model.get_env(), "recorder": self.recorder}, state)
-            self.saved_at = steps
-        self._next = (steps // self.every + 1) * self.every
 
 
 class TransitionRecorder(gym.Wrapper):
@@ -432,7 +375,6 @@ __all__ = [
     "COLLECT_CHECKPOINT_EVERY",
     "OFFLINE_DEFAULTS",
     "SEQUENTIAL_DEFAULTS",
-    "CollectionCheckpoint",
     "TransitionRecorder",
     "collect_directed_transitions",
     "collection_checkpoint_dir",

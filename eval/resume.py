@@ -3,7 +3,7 @@ next ``run_job`` of the same job, continuing exactly as an uninterrupted run wou
 
 A planning agent's online run on the Sawyer takes 2-3 hours on one core, about a session; without this, a run cut
 short (a session's end, a killed process) started again from zero. After each of ``EvalCallback``'s evaluations
-(every ``eval_freq`` transitions) :class:`RunCheckpoint` writes, into ``<run>/resume/``:
+(every ``eval_freq`` transitions) :class:`ResumeCheckpoint` writes, into ``<run>/resume/``:
 
 - ``agent_<t>.zip``: the agent's resumable checkpoint (``save_checkpoint``: weights, optimiser, replay buffers,
   generators, and the online loop's plans in flight, ``ebm_agent.base.OnlineLoopState``);
@@ -28,6 +28,7 @@ import json
 import pickle
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,6 +40,7 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from ebm_agent.checkpoint_files import atomic_path
 from eval.jobs import RESUME_FOLDER, STATE_FILE
 from eval.provenance import defaults_digest, job_fingerprint, read_json_dict
+from eval.stop import StopFlag
 
 if TYPE_CHECKING:
     from stable_baselines3.common.vec_env import VecEnv
@@ -48,7 +50,7 @@ if TYPE_CHECKING:
 __all__ = [
     "RESUME_FOLDER",
     "STATE_FILE",
-    "RunCheckpoint",
+    "ResumeCheckpoint",
     "RunState",
     "discard_run_state",
     "read_checkpoint_files",
@@ -115,44 +117,65 @@ class RunState:
             np.savez(callback.log_path, **arrays)
 
 
-class RunCheckpoint(BaseCallback):
-    """``EvalCallback``'s ``callback_after_eval``: save what resuming the run needs, right after each evaluation.
+class ResumeCheckpoint(BaseCallback):
+    """The harness's one checkpoint callback: it writes the checkpoint that resuming needs at the steps it is due.
 
-    No checkpoint is written at the end of the budget: the run is then finished within seconds.
+    Due: every ``every`` transitions (a directed collection), right after each evaluation of ``after`` (an online
+    run: the ``EvalCallback`` placed before it in the callback list), and, once ``flag`` is set (SIGTERM, Ctrl-C:
+    :func:`eval.stop.stop_at_next_step`), at the current step, after which ``learn`` stops. Never twice for one step,
+    and never at or past ``total`` (the work then ends within seconds). What a checkpoint holds is ``write``'s
+    business: :func:`write_run_state` for an online run, :func:`write_checkpoint_files` for a collection.
 
-    :param job: the run.
-    :param learn_time_s: time spent in ``learn`` by earlier processes of this run (0 for a fresh one).
-    :param resumed_at: transitions at which earlier processes resumed.
+    :param write: ``write(elapsed_s)`` writes the checkpoint at the model's current step; ``elapsed_s`` is the time
+        spent since ``learn`` began in this process.
+    :param total: the budget, in transitions.
+    :param every: transitions between two checkpoints, or None.
+    :param after: an ``EvalCallback`` earlier in the same callback list, or None.
+    :param flag: the stop flag, or None.
     """
 
-    def __init__(self, job: Job, learn_time_s: float = 0.0, resumed_at: list[int] | None = None) -> None:
+    def __init__(
+        self,
+        write: Callable[[float], object],
+        total: int,
+        every: int | None = None,
+        after: EvalCallback | None = None,
+        flag: StopFlag | None = None,
+    ) -> None:
         super().__init__()
-        self.job = job
-        self.learn_time_before = float(learn_time_s)
-        self.resumed_at = list(resumed_at or [])
+        if every is not None and every < 1:
+            raise ValueError(f"every must be a positive number of transitions or None, got {every}")
+        self.write, self.total, self.every, self.after, self.flag = write, int(total), every, after, flag
         self.saved_at: int | None = None
         self._start = time.perf_counter()
+        self._next: int | None = None
+        self._evaluations = 0
 
     def _init_callback(self) -> None:
         self._start = time.perf_counter()
+        # The model's count: the callback's own is 0 until its first step, which for a resumed run would write a
+        # needless checkpoint one step after the one it resumed from.
+        steps = int(self.model.num_timesteps)
+        self._next = None if self.every is None else (steps // self.every + 1) * self.every
+        self._evaluations = len(self.after.evaluations_timesteps) if self.after is not None else 0
 
     def _on_step(self) -> bool:
-        parent = self.parent
-        if isinstance(parent, EvalCallback):
-            self.save(parent)
-        return True
-
-    def save(self, callback: EvalCallback) -> None:
-        """Write the run's checkpoint at the model's current step (nothing at the end of the budget).
-
-        Called after each evaluation, and by ``eval.stop.CheckpointOnStop`` at the step where a stop was asked for.
-
-        :param callback: the run's ``EvalCallback`` (its eval env and the curve so far).
-        """
         steps = int(self.model.num_timesteps)
-        if steps < self.job.timesteps:
-            learn_time = self.learn_time_before + time.perf_counter() - self._start
-            write_run_state(self.job, self.model, callback, learn_time, self.resumed_at)
+        due = self._next is not None and steps >= self._next
+        if self.after is not None and len(self.after.evaluations_timesteps) > self._evaluations:
+            self._evaluations, due = len(self.after.evaluations_timesteps), True
+        stopping = self.flag is not None and self.flag.requested
+        if (due or stopping) and self.saved_at != steps:
+            self.save()
+        if self._next is not None and self.every is not None and steps >= self._next:
+            self._next = (steps // self.every + 1) * self.every
+        return not stopping
+
+    def save(self) -> None:
+        """Write the checkpoint at the model's current step (nothing at or past the budget)."""
+        steps = int(self.model.num_timesteps)
+        if steps < self.total:
+            self.write(time.perf_counter() - self._start)
             self.saved_at = steps
 
 

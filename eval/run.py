@@ -29,8 +29,8 @@ from eval.jobs import EVAL_SEED_OFFSET, RESUME_FOLDER, RUN_OUTPUTS, Job, JobResu
 from eval.pretraining import pretrain
 from eval.provenance import defaults_digest, job_fingerprint, machine_info
 from eval.registry import get_agent
-from eval.resume import RunCheckpoint, RunState, discard_run_state, read_run_state, resumable
-from eval.stop import CheckpointOnStop, RunStopped, raise_if_stopped, stop_at_next_step
+from eval.resume import ResumeCheckpoint, RunState, discard_run_state, read_run_state, resumable, write_run_state
+from eval.stop import RunStopped, raise_if_stopped, stop_at_next_step
 
 
 def run_job(job: Job) -> JobResult:
@@ -273,10 +273,6 @@ def _learn_online(
     after_eval: list[BaseCallback] = []
     if not job.progress_bar:  # one line per evaluation says that a long run is alive and how far it is
         after_eval.append(EvaluationLine(str(job.run_dir), job.timesteps))
-    checkpoint: RunCheckpoint | None = None
-    if resumable(model, job):
-        checkpoint = RunCheckpoint(job, *((resume.learn_time_s, [*resume.resumed_at, resume.num_timesteps]) if resume else ()))
-        after_eval.append(checkpoint)
     # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
     eval_callback = EvalCallback(
         eval_env,
@@ -301,13 +297,17 @@ def _learn_online(
         reset_num_timesteps=resume is None,
         progress_bar=job.progress_bar,
     )
-    if checkpoint is None:  # not resumable (PPO's minutes-long runs): signals keep their usual effect
+    if not resumable(model, job):  # PPO's minutes-long runs: no checkpoints, signals keep their usual effect
         learn(callback=CallbackList([*extra, eval_callback]))
     else:
-        run_checkpoint = checkpoint
+        before, resumed_at = (resume.learn_time_s, [*resume.resumed_at, resume.num_timesteps]) if resume else (0.0, [])
+
+        def write(elapsed_s: float) -> None:
+            write_run_state(job, model, eval_callback, before + elapsed_s, resumed_at)
+
         with stop_at_next_step() as flag:
-            on_stop = CheckpointOnStop(flag, lambda: run_checkpoint.save(eval_callback), lambda: run_checkpoint.saved_at)
-            learn(callback=CallbackList([*extra, eval_callback, on_stop]))
+            checkpoint = ResumeCheckpoint(write, job.timesteps, after=eval_callback, flag=flag)
+            learn(callback=CallbackList([*extra, eval_callback, checkpoint]))
         raise_if_stopped(flag, int(model.num_timesteps), job.timesteps, f"run {job.run_dir}", job.run_dir / RESUME_FOLDER)
     timesteps = int(model.num_timesteps)
     # An evaluation EvalCallback just ran at the final step is the final evaluation (same call, same env):

@@ -3,11 +3,11 @@
 A Sawyer run or directed collection keeps a checkpoint every 10,000 transitions (``eval.resume``,
 ``eval.pretraining``), 20 to 30 minutes of one core apart. A process killed between two of them loses that work.
 Inside :func:`stop_at_next_step`, SIGTERM (what ``kill``, a batch scheduler's preemption or a session's end sends)
-and Ctrl-C (SIGINT) do not end the process: they set a flag. The run's :class:`CheckpointOnStop` callback
-sees it after the current env step (a step ends within a second; an evaluation in progress is finished first),
-writes the same checkpoint the run writes after an evaluation, and stops ``learn``. The job then ends with status
-``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from that step. A second signal
-stops the process at once, as without this module, leaving the last checkpoint written.
+and Ctrl-C (SIGINT) do not end the process: they set a flag. The run's checkpoint callback
+(``eval.resume.ResumeCheckpoint``) sees it after the current env step (a step ends within a second; an evaluation
+in progress is finished first), writes the same checkpoint the run writes after an evaluation, and stops ``learn``.
+The job then ends with status ``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from
+that step. A second signal stops the process at once, as without this module, leaving the last checkpoint written.
 
 Outside the block (building envs, offline training, final evaluations, figures) the signals keep their usual
 effect, except in the workers of ``LocalExecutor``'s pool, which remember them (:func:`install_worker_handlers`):
@@ -25,8 +25,6 @@ import threading
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import Any
-
-from stable_baselines3.common.callbacks import BaseCallback
 
 STOP_SIGNALS: tuple[signal.Signals, ...] = (signal.SIGTERM, signal.SIGINT)
 """The signals that ask for a checkpoint and a stop."""
@@ -135,31 +133,6 @@ def stop_at_next_step(on_request: Callable[[str], None] | None = None, quiet: bo
     finally:
         for signum, old in previous.items():
             signal.signal(signum, old)
-
-
-class CheckpointOnStop(BaseCallback):
-    """Once ``flag`` is set: call ``save`` (which writes the run's checkpoint) and stop ``learn``.
-
-    Place it after the callbacks that may write a checkpoint of their own at the same step (``EvalCallback`` with
-    ``RunCheckpoint``); ``save`` is not called twice for one step.
-
-    :param flag: the flag of :func:`stop_at_next_step`.
-    :param save: writes the checkpoint at the model's current step.
-    :param saved_step: returns the step of the checkpoint on disk (None: none), to skip a second write.
-    """
-
-    def __init__(self, flag: StopFlag, save: Callable[[], object], saved_step: Callable[[], int | None] | None = None) -> None:
-        super().__init__()
-        self.flag, self.save, self.saved_step = flag, save, saved_step
-        self.stopped_at: int | None = None
-
-    def _on_step(self) -> bool:
-        if not self.flag.requested:
-            return True
-        if self.saved_step is None or self.saved_step() != self.num_timesteps:
-            self.save()
-        self.stopped_at = self.num_timesteps
-        return False
 
 
 def raise_if_stopped(flag: StopFlag, done: int, total: int, what: str, where: object) -> None:

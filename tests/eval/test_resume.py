@@ -119,3 +119,33 @@ def test_sigterm_mid_run_checkpoints_that_step_and_the_rerun_ends_as_an_uninterr
         np.testing.assert_array_equal(got["timesteps"], [110, 220, 300])  # the evaluation after the stop falls at 220
         np.testing.assert_array_equal(got["results"], want["results"])
     assert _weights(job.run_dir) == _weights(whole.run_dir)
+
+
+def test_the_one_checkpoint_callback_writes_when_due_once_per_step_and_never_at_the_budget():
+    from types import SimpleNamespace
+
+    from eval.resume import ResumeCheckpoint
+    from eval.stop import StopFlag
+
+    model = SimpleNamespace(num_timesteps=0)
+    evaluations = SimpleNamespace(evaluations_timesteps=[])
+    flag, written = StopFlag(), []
+    callback = ResumeCheckpoint(lambda elapsed: written.append(model.num_timesteps), 10, every=4, after=evaluations, flag=flag)
+    callback.model = model
+    callback._init_callback()
+
+    def step(evaluate: bool = False) -> bool:
+        model.num_timesteps += 1
+        if evaluate:
+            evaluations.evaluations_timesteps.append(model.num_timesteps)
+        return callback._on_step()
+
+    assert all(step() for _ in range(3)) and written == []
+    assert step() and written == [4]  # every 4 transitions
+    assert step(evaluate=True) and written == [4, 5]  # right after an evaluation
+    flag.signal_name = "SIGTERM"
+    assert not step() and written == [4, 5, 6]  # a stop: a checkpoint at this step, then learn stops
+    assert not callback._on_step() and written == [4, 5, 6]  # never twice for one step
+    flag.signal_name = None
+    model.num_timesteps = 9
+    assert step(evaluate=True) and written == [4, 5, 6]  # at the budget: nothing (the run ends within seconds)
