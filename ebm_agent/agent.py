@@ -28,7 +28,7 @@ from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
-from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss
+from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss, reach_candidates
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
@@ -41,6 +41,9 @@ GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
     "reward": RewardGoalEnergy.negative_l1,  # max-ent form (paper Sec. 3.2): -sum_t R(s_t) with R = -L1
 }
 """Goal energies by name; pass an instance to ``cost=`` for anything else."""
+
+LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach")
+"""Energy objectives by name (``loss=``)."""
 
 PLANNERS: dict[str, tuple[type, type]] = {"mppi": (MPPIPlanner, MPPIConfig), "langevin": (LangevinPlanner, LangevinConfig)}
 """Planners by name with their config types."""
@@ -98,7 +101,15 @@ class EBMPlannerAgent(PlannerAgentBase):
         a copy, so the caller's object is never changed.
     :param energy: :class:`EnergyConfig` or a dict of its fields.
     :param cost: :class:`CostConfig` or a dict of its fields.
-    :param loss: ``"cd"`` (the paper's contrastive loss) or ``"infonce"``.
+    :param loss: ``"cd"`` (the paper's contrastive loss), ``"infonce"`` (each positive against the batch's sampled
+        negatives) or ``"infonce_reach"``: each real (s, s') against ``reach_candidates`` next states drawn uniformly in
+        the one-step reach box around s (:func:`~ebm_agent.losses.reach_candidates`), so that E(s, s') learns
+        -log p(s' | s) up to a constant and rises where the env refuses a move (issue #34). Its energy scale is in
+        nats: a transition E higher than another is e^E times less likely under the data's policy; ``l2_coeff`` then
+        weighs a term mean E(s, s')^2 over the real transitions that pins their energy to 0, since InfoNCE alone
+        leaves a free offset per state. That loss ignores the planned and sampled negatives. Off by default (the
+        paper's CD).
+    :param reach_candidates: K, uniform candidates per positive of ``loss="infonce_reach"`` (64); unused otherwise.
     :param l2_coeff: weight of the energy-magnitude regulariser of the CD loss (1.0).
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
@@ -126,6 +137,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         cost: CostConfig | dict[str, Any] | None = None,
         loss: str = "cd",
         l2_coeff: float = 1.0,
+        reach_candidates: int = 64,
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
@@ -139,8 +151,10 @@ class EBMPlannerAgent(PlannerAgentBase):
     ) -> None:
         if isinstance(planner, str) and planner not in PLANNERS:
             raise ValueError(f"planner must be one of {sorted(PLANNERS)} or a Planner instance, got {planner!r}.")
-        if loss not in ("cd", "infonce"):
-            raise ValueError(f"loss must be 'cd' (the paper's) or 'infonce', got {loss!r}.")
+        if loss not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES} ('cd' is the paper's), got {loss!r}.")
+        if isinstance(reach_candidates, bool) or not isinstance(reach_candidates, int) or reach_candidates < 1:
+            raise ValueError(f"reach_candidates must be a positive int, got {reach_candidates!r}.")
         self.planner_kind = planner
         if isinstance(planner, str):
             config_type = PLANNERS[planner][1]
@@ -155,6 +169,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.cost_config = make_config(CostConfig, cost, "cost")
         self.loss = loss
         self.l2_coeff = l2_coeff
+        self.reach_candidates = reach_candidates
+        self._reach_radius: torch.Tensor | None = None  # [D] largest real |s' - s| seen, for loss="infonce_reach"
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         self.extra_energies: list[ExtraEnergy] = []
@@ -232,6 +248,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             "plan_cost",
             "extra_energies",
             "_negative_radius",
+            "_reach_radius",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -341,12 +358,25 @@ class EBMPlannerAgent(PlannerAgentBase):
         energy = self.energy_model
         self.policy.set_training_mode(True)
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
-        energy_pos = energy(as_tensor(pos_states), as_tensor(pos_next))  # [P]
-        energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
-        if self.loss == "cd":
-            loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
-        else:
+        states = as_tensor(pos_states)  # [P, D]
+        energy_pos = energy(states, as_tensor(pos_next))  # [P]
+        if self.loss == "infonce_reach":
+            candidates = reach_candidates(
+                states, self._update_reach_radius(pos_states, pos_next), self.reach_candidates, self._generator
+            )  # [P, K, D]
+            energy_neg = energy(states[:, None, :].expand_as(candidates), candidates)  # [P, K]
             loss, stats = info_nce_loss(energy_pos, energy_neg)
+            # InfoNCE fixes E(s, .) only up to a constant per s; pinning the real transitions' energy to 0 makes
+            # energies comparable across states (without it the per-state offset swamps the walls: AUROC ~0.53).
+            anchor = energy_pos.square().mean()
+            loss = loss + self.l2_coeff * anchor
+            stats.update(loss_anchor=float(anchor.detach()), loss=float(loss.detach()))
+        else:
+            energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
+            if self.loss == "cd":
+                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+            else:
+                loss, stats = info_nce_loss(energy_pos, energy_neg)
         optimizer = self.policy.optimizer
         assert optimizer is not None
         optimizer.zero_grad()
@@ -362,6 +392,18 @@ class EBMPlannerAgent(PlannerAgentBase):
         optimizer.step()
         stats["energy_gap"] = stats["energy_neg"] - stats["energy_pos"]
         return stats
+
+    def _update_reach_radius(self, states: np.ndarray, next_states: np.ndarray) -> torch.Tensor:
+        """The half-width of the reach box: the largest real |s' - s| per dim seen so far (the dataset's offline).
+
+        :param states: [P, D] real states.
+        :param next_states: [P, D] real next states.
+        :return: [D] radius, floored at 1e-6 so that a dim that never moved still gets candidates.
+        """
+        step = torch.as_tensor(np.abs(next_states - states).max(axis=0), device=self.device)  # [D]
+        radius = step if self._reach_radius is None else torch.maximum(self._reach_radius, step)
+        self._reach_radius = radius.clamp_min(1e-6)
+        return self._reach_radius
 
     def _adapt_iterations(self, gap: float) -> None:
         """The original's adaptive planning budget: more iterations while negatives stay far above positives."""
@@ -412,11 +454,16 @@ class EBMPlannerAgent(PlannerAgentBase):
             np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device
         )
         self._num_candidates = num_candidates
+        if self.loss == "infonce_reach":
+            self._update_reach_radius(dataset.states, dataset.next_states)
         return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
-        negatives = self._sample_negatives(states, self._negative_radius, self._num_candidates)
-        neg_states, neg_next = self._replay_negatives(states, negatives)
+        if self.loss == "infonce_reach":  # its contrast set is drawn in the gradient step
+            neg_states, neg_next = states, next_states
+        else:
+            negatives = self._sample_negatives(states, self._negative_radius, self._num_candidates)
+            neg_states, neg_next = self._replay_negatives(states, negatives)
         stats = self._gradient_step(states, next_states, neg_states, neg_next)
         if self.inverse_model is not None:
             stats.update({f"inverse_{k}": v for k, v in self.inverse_model.update(states, next_states, actions).items()})

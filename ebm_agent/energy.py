@@ -15,7 +15,7 @@ from ebm_agent.config import check_field_types
 from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.networks import build_mlp, make_activation, normalise_dims
 
-__all__ = ["EnergyConfig", "EnergyModel", "PeriodicFeatures", "TransitionEvaluator"]
+__all__ = ["EnergyConfig", "EnergyModel", "FourierFeatures", "PeriodicFeatures", "TransitionEvaluator"]
 
 
 @dataclass
@@ -33,6 +33,12 @@ class EnergyConfig:
         to the network as (sin, cos) of the angle rather than the raw coordinate, so that the two sides of the wrap
         are neighbours (see :class:`PeriodicFeatures`). Not in the original, which fed Reacher's raw normalised
         angles: their wrap sits at the arm's rest pose (docs/agent.md). No effect on envs without periodic dims.
+    :param difference_input: feed (phi(s), phi(s') - phi(s)) instead of (phi(s), phi(s')). Off (the original's).
+    :param fourier_features: M > 0 appends M random Fourier features (sin and cos of random projections) of the
+        network's input (:class:`FourierFeatures`), against the MLP's bias toward smooth functions that blurs walls
+        (issue #34). 0 (off, the original's).
+    :param fourier_scale: standard deviation of the Fourier frequencies, in cycles per unit of the input (2.0: best of
+        1, 2, 4, 8, 16 on the maze probe; 16 collapses the energy to a constant).
     """
 
     hidden_dim: int = 128
@@ -41,6 +47,9 @@ class EnergyConfig:
     spectral_norm: bool = False
     positive_output: bool = True
     periodic_inputs: bool = True
+    difference_input: bool = False
+    fourier_features: int = 0
+    fourier_scale: float = 2.0
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -49,6 +58,10 @@ class EnergyConfig:
         if not isinstance(self.num_hidden_layers, int) or self.num_hidden_layers < 0:
             raise ValueError(f"EnergyConfig.num_hidden_layers must be an int >= 0, got {self.num_hidden_layers!r}.")
         make_activation(self.activation)
+        if isinstance(self.fourier_features, bool) or self.fourier_features < 0:
+            raise ValueError(f"EnergyConfig.fourier_features must be an int >= 0, got {self.fourier_features!r}.")
+        if not self.fourier_scale > 0:
+            raise ValueError(f"EnergyConfig.fourier_scale must be > 0, got {self.fourier_scale!r}.")
 
     def __setstate__(self, state: dict[str, object]) -> None:
         """Unpickle (SB3's ``load``); files saved before ``periodic_inputs`` existed fed raw angles, so they keep that."""
@@ -104,6 +117,42 @@ class PeriodicFeatures(nn.Module):
         return f"dims={self.dims}, period={self.period}"
 
 
+class FourierFeatures(nn.Module):
+    """
+    Random Fourier features (Tancik et al. 2020) appended to an input: [..., I] -> [..., I + 2M].
+
+    ``[x, sin(2 pi x B), cos(2 pi x B)]`` with B [I, M] drawn once from N(0, scale^2) (torch's global generator, so the
+    agent's seed fixes it) and saved with the weights. The high frequencies let an MLP fit a step (a wall) that raw
+    coordinates only approach slowly.
+
+    :param in_dim: I.
+    :param num_features: M.
+    :param scale: standard deviation of the frequencies (cycles per input unit).
+    """
+
+    def __init__(self, in_dim: int, num_features: int, scale: float) -> None:
+        super().__init__()
+        self.in_dim, self.num_features, self.scale = in_dim, num_features, float(scale)
+        self.register_buffer("frequencies", torch.randn(in_dim, num_features) * (2.0 * math.pi * scale))  # [I, M]
+
+    @property
+    def out_dim(self) -> int:
+        """I + 2M."""
+        return self.in_dim + 2 * self.num_features
+
+    def forward(self, inputs: Tensor) -> Tensor:
+        """
+        :param inputs: [..., I].
+        :return: [..., I + 2M].
+        """
+        frequencies: Tensor = self.frequencies  # type: ignore[assignment]
+        phases = inputs @ frequencies.to(inputs.dtype)  # [..., M]
+        return torch.cat([inputs, torch.sin(phases), torch.cos(phases)], dim=-1)
+
+    def extra_repr(self) -> str:
+        return f"in_dim={self.in_dim}, num_features={self.num_features}, scale={self.scale}"
+
+
 class EnergyModel(nn.Module):
     """
     MLP energy over a transition: ``E(s, s') = f(concat(phi(s), phi(s')))``, one scalar per transition.
@@ -140,8 +189,11 @@ class EnergyModel(nn.Module):
         feature_dim = state_dim if self.features is None else self.features.feature_dim  # F
 
         cfg = self.config
+        self.fourier = (
+            FourierFeatures(2 * feature_dim, cfg.fourier_features, cfg.fourier_scale) if cfg.fourier_features else None
+        )
         self.net = build_mlp(
-            2 * feature_dim,
+            2 * feature_dim if self.fourier is None else self.fourier.out_dim,
             1,
             hidden_dim=cfg.hidden_dim,
             num_hidden_layers=cfg.num_hidden_layers,
@@ -208,6 +260,11 @@ class EnergyModel(nn.Module):
             pairs = pairs.to(mask.dtype)
         if self.masked_dims:
             pairs = pairs * mask
+        if self.config.difference_input:
+            first, second = pairs[:, : self.feature_dim], pairs[:, self.feature_dim :]  # [M, F] each
+            pairs = torch.cat([first, second - first], dim=1)
+        if self.fourier is not None:
+            pairs = self.fourier(pairs)  # [M, 2F + 2 * fourier_features]
         return self.net(pairs).reshape(leading)  # [M, 1] -> [...]
 
     def inference_evaluator(self, dtype: torch.dtype | None = None, fused: bool = True) -> TransitionEvaluator | None:
@@ -221,8 +278,10 @@ class EnergyModel(nn.Module):
         :param fused: use oneDNN's fused layers on CPU when available (faster; float32 energies equal the module's to
             float rounding); False gives the module's float32 energies bit for bit.
         :return: a callable with :meth:`forward`'s signature and results, or None when the network cannot be evaluated
-            that way (spectral norm in training mode).
+            that way (spectral norm in training mode, ``difference_input`` or Fourier features).
         """
+        if self.config.difference_input or self.fourier is not None:
+            return None
         network = WorkspaceMLP.from_sequential(self.net, dtype, fused)
         if network is None:
             return None

@@ -1,4 +1,4 @@
-"""Training objectives for the energy model: contrastive divergence (the paper's) and InfoNCE (IBC-style option)."""
+"""Training objectives for the energy model: contrastive divergence (the paper's) and InfoNCE (IBC-style options)."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-__all__ = ["contrastive_divergence_loss", "info_nce_loss"]
+__all__ = ["contrastive_divergence_loss", "info_nce_loss", "reach_candidates"]
 
 
 def contrastive_divergence_loss(
@@ -91,6 +91,29 @@ def info_nce_loss(energy_pos: Tensor, energy_neg: Tensor, temperature: float = 1
         "accuracy": float(accuracy),
     }
     return loss, stats
+
+
+def reach_candidates(states: Tensor, radius: Tensor, num_candidates: int, generator: torch.Generator | None = None) -> Tensor:
+    """
+    Candidate next states drawn uniformly in the one-step reach box around each state: ``s + U(-r, r)^D``.
+
+    The contrast set of the ``loss="infonce_reach"`` objective (Implicit BC's counter-examples, here over next
+    states): with the real s' as the positive among them, InfoNCE makes ``E(s, s')`` approximate
+    ``-log p(s' | s)`` up to a constant per s. A candidate through a wall has p = 0, so the energy must rise there;
+    a feasible candidate is no worse than the real s', so the energy stays flat over what the env can reach. The
+    box is not clipped to the state bounds: leaving the box is infeasible too, and the energy should learn it.
+
+    :param states: [B, D] real states s.
+    :param radius: [D] half-width r of the box (the largest real |s' - s| per dim).
+    :param num_candidates: K candidates per state.
+    :param generator: the random stream (on the states' device), or None for torch's global one.
+    :return: [B, K, D] candidate next states.
+    """
+    if num_candidates < 1:
+        raise ValueError(f"reach_candidates: num_candidates must be >= 1, got {num_candidates}.")
+    shape = (states.shape[0], num_candidates, states.shape[1])
+    noise = torch.rand(shape, generator=generator, device=states.device, dtype=states.dtype) * 2 - 1  # [B, K, D]
+    return states[:, None, :] + noise * radius.to(states.dtype)
 
 
 def _check_nonempty(energy: Tensor, name: str) -> None:
