@@ -12,10 +12,11 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol
 
 import gymnasium as gym
-from stable_baselines3 import PPO
+from stable_baselines3 import PPO, SAC, HerReplayBuffer
 from stable_baselines3.common.env_util import make_vec_env
 
 from baselines.ppo import exact_budget_callback, make_ppo, ppo_hyperparams
+from baselines.sac_her import make_sac_her, off_policy_budget_callback, sac_her_hyperparams
 from ebm_agent.presets import preset_settings
 from eval.digest import class_defaults, env_inverse_dynamics_defaults
 
@@ -98,6 +99,20 @@ def ppo_defaults(env_id: str, preset: str = "") -> dict[str, Any]:
     """
 
     return {"table": ppo_hyperparams(env_id), "PPO": class_defaults(PPO)}
+
+
+def sac_her_defaults(env_id: str, preset: str = "") -> dict[str, Any]:
+    """SAC + HER's settings for an env: the table's entry and SB3's SAC and ``HerReplayBuffer`` defaults.
+
+    :param env_id: the env.
+    :return: ``{"table": ..., "SAC": ..., "HerReplayBuffer": ...}``.
+    """
+
+    return {
+        "table": sac_her_hyperparams(env_id),
+        "SAC": class_defaults(SAC),
+        "HerReplayBuffer": class_defaults(HerReplayBuffer),
+    }
 
 
 def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
@@ -191,6 +206,40 @@ def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
     return [exact_budget_callback(total_timesteps)]
 
 
+def make_sac_her_agent(
+    env_id: str,
+    env_kwargs: dict[str, Any],
+    seed: int,
+    tensorboard_log: str | None,
+    device: str,
+    hyperparams: dict[str, Any],
+    verbose: int = 0,
+) -> BaseAlgorithm:
+    """Build SB3's SAC with a ``HerReplayBuffer`` and the per-env hyperparameters of ``baselines.sac_her``. See
+    ``AgentFactory``."""
+
+    return make_sac_her(
+        env_id,
+        seed=seed,
+        tensorboard_log=tensorboard_log,
+        verbose=verbose,
+        device=device,
+        env_kwargs=env_kwargs or None,
+        **hyperparams,
+    )
+
+
+def sac_her_callbacks(total_timesteps: int) -> list[BaseCallback]:
+    """With its table's 1 env and ``train_freq=1`` SAC stops at the budget by itself; this guard keeps it exact
+    when ``n_envs`` or ``train_freq`` are overridden.
+
+    :param total_timesteps: the transition budget.
+    :return: ``[baselines.sac_her.off_policy_budget_callback(total_timesteps)]``.
+    """
+
+    return [off_policy_budget_callback(total_timesteps)]
+
+
 AGENTS: dict[str, AgentSpec] = {
     "ebm": AgentSpec(
         make_ebm,
@@ -212,6 +261,13 @@ AGENTS: dict[str, AgentSpec] = {
         description="action-conditioned feed-forward model + MPPI",
         defaults=_class_defaults_of("baselines.action_ff", "ActionFFAgent"),
         class_name="ActionFFAgent",
+    ),
+    "sac-her": AgentSpec(
+        make_sac_her_agent,
+        "SAC_HER",
+        sac_her_callbacks,
+        description="SB3 SAC + HER replay (goal relabelling)",
+        defaults=sac_her_defaults,
     ),
     "random": AgentSpec(
         make_random,
@@ -256,4 +312,5 @@ __all__ = [
     "get_agent",
     "ppo_defaults",
     "register_agent",
+    "sac_her_defaults",
 ]
