@@ -32,6 +32,7 @@ from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss, reach_c
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
+from ebm_agent.subgoals import GraphSubgoals
 
 SelfEBMPlannerAgent = TypeVar("SelfEBMPlannerAgent", bound="EBMPlannerAgent")
 
@@ -41,6 +42,9 @@ GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
     "reward": RewardGoalEnergy.negative_l1,  # max-ent form (paper Sec. 3.2): -sum_t R(s_t) with R = -L1
 }
 """Goal energies by name; pass an instance to ``cost=`` for anything else."""
+
+SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed"})
+"""The keywords of ``subgoal_graph`` (:meth:`ebm_agent.subgoals.GraphSubgoals.from_transitions`)."""
 
 LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach")
 """Energy objectives by name (``loss=``)."""
@@ -114,6 +118,12 @@ class EBMPlannerAgent(PlannerAgentBase):
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"`` or an instance.
+    :param subgoal_graph: long-horizon goal reaching (issue #36): keyword arguments of
+        :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}`` for its defaults), with which the agent
+        builds a graph over the real transitions it learned from at the end of ``learn_offline`` (the dataset's) and
+        of ``learn`` (its replay buffer's), and then aims each plan at a subgoal along the graph's shortest path to
+        the goal (``self.subgoals``). None (the default, the paper's): plans aim at the goal. The graph is not saved
+        with the agent: after ``load``, call :meth:`build_subgoals`.
     :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
         states only); 0 disables them.
     :param stats_window_size: episodes averaged for ``rollout/*``.
@@ -142,6 +152,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
         image_log_interval: int = 1000,
+        subgoal_graph: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -173,6 +184,14 @@ class EBMPlannerAgent(PlannerAgentBase):
         self._reach_radius: torch.Tensor | None = None  # [D] largest real |s' - s| seen, for loss="infonce_reach"
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
+        if subgoal_graph is not None:
+            unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS)
+            if not isinstance(subgoal_graph, dict) or unknown:
+                raise ValueError(
+                    f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
+                    f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
+                )
+        self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
         self.extra_energies: list[ExtraEnergy] = []
         super().__init__(
             policy,
@@ -456,7 +475,28 @@ class EBMPlannerAgent(PlannerAgentBase):
         self._num_candidates = num_candidates
         if self.loss == "infonce_reach":
             self._update_reach_radius(dataset.states, dataset.next_states)
-        return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
+        super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
+        if self.subgoal_graph is not None:
+            self.build_subgoals(dataset.states, dataset.next_states)
+        return self
+
+    def learn(self: SelfEBMPlannerAgent, *args: Any, **kwargs: Any) -> SelfEBMPlannerAgent:
+        """:meth:`PlannerAgentBase.learn`, then (with ``subgoal_graph``) the subgoal graph over the replay buffer."""
+        super().learn(*args, **kwargs)
+        if self.subgoal_graph is not None and len(self.pos_buffer) > 0:
+            real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+            self.build_subgoals(real.states, real.next_states)
+        return self
+
+    def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> GraphSubgoals:
+        """Build the subgoal graph (``subgoal_graph``'s settings, or the defaults) over real transitions and use it.
+
+        :param states: [M, D] real states.
+        :param next_states: [M, D] their real next states.
+        :return: the graph, also ``self.subgoals``.
+        """
+        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **(self.subgoal_graph or {}))
+        return self.subgoals
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         if self.loss == "infonce_reach":  # its contrast set is drawn in the gradient step

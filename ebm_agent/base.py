@@ -179,6 +179,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.num_plans = 0
         self._n_updates = 0
         self._online_loop: OnlineLoopState | None = None
+        self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
         if _init_setup_model:
             self._setup_model()
 
@@ -266,6 +267,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             "inverse_model",
             "planner",
             "_generator",
+            "subgoals",
         ]
 
     # --------------------------------------------------------- model hooks
@@ -465,7 +467,11 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             need[idx[drift > self.online.replan_threshold]] = True
         if need.any():
             new_plans, new_actions, _ = self._plan(
-                states[need], goals[need], None, self._fresh_generator(deterministic), training=False
+                states[need],
+                self._plan_goals(states[need], goals[need]),
+                None,
+                self._fresh_generator(deterministic),
+                training=False,
             )
             plans[need] = new_plans
             planned_actions[need] = np.nan if new_actions is None else new_actions
@@ -613,11 +619,26 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 init_actions[cold] = np.nan
             start = time.perf_counter()
             new_plans, new_actions, cost = self._plan(
-                states[group], goals[group], init, self._generator, training=True, init_actions=init_actions
+                states[group],
+                self._plan_goals(states[group], goals[group]),
+                init,
+                self._generator,
+                training=True,
+                init_actions=init_actions,
             )
             self.logger.record_mean("plan/ms", 1000.0 * (time.perf_counter() - start) / len(group))
             loop.plans[group], loop.plan_cost[group] = new_plans, cost
             loop.planned_actions[group] = np.nan if new_actions is None else new_actions
+
+    def _plan_goals(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """The goals the plans aim at: ``subgoals.subgoals(states, goals)`` where a subgoal provider is set (long-horizon
+        goal reaching, :mod:`ebm_agent.subgoals`), else the goals themselves.
+
+        :param states: [n, D] current states.
+        :param goals: [n, G] their goals.
+        :return: [n, G].
+        """
+        return goals if self.subgoals is None else self.subgoals.subgoals(states, goals)
 
     def _warm_plans_apart(self) -> bool:
         """Whether warm-started and fresh plans get different planning budgets (then they are planned apart).

@@ -228,6 +228,7 @@ def make_cell(
     dataset: str = "random",
     budget_multiple: int = 1,
     env_kwargs: dict[str, Any] | None = None,
+    eval_env_kwargs: dict[str, Any] | None = None,
     hyperparams: dict[str, Any] | None = None,
     extra_evaluations: dict[str, dict[str, Any]] | None = None,
     evaluation: str | None = None,
@@ -249,6 +250,8 @@ def make_cell(
     :param dataset: pretrained only: the dataset.
     :param budget_multiple: online only: the budget as a multiple of the scale's online budget.
     :param env_kwargs: kwargs of the training and evaluation envs, over the scale's.
+    :param eval_env_kwargs: kwargs of the evaluation env only, over those (e.g. the paper's start for an agent
+        trained from random starts).
     :param hyperparams: agent keyword arguments, over the preset's and the scale's.
     :param extra_evaluations: extra evaluations of every run.
     :param evaluation: the extra evaluation whose score stands for the cell.
@@ -286,7 +289,7 @@ def make_cell(
             eval_episodes=scale.eval_episodes,
             hyperparams=agent_kwargs,
             env_kwargs=train_kwargs,
-            eval_env_kwargs={**PAPER_EVAL_KWARGS.get(env_id, {}), **train_kwargs},
+            eval_env_kwargs={**PAPER_EVAL_KWARGS.get(env_id, {}), **train_kwargs, **(eval_env_kwargs or {})},
             device=context.device,
             out_dir=context.out_dir,
             mode=mode,

@@ -1,0 +1,118 @@
+"""Graph subgoals (ebm_agent.subgoals): paths over visited states that the energy allows, and subgoals along them."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+import envs  # noqa: F401  (registers the ids)
+from ebm_agent import EBMPlannerAgent
+from ebm_agent.subgoals import GraphSubgoals
+
+
+class WallEnergy(torch.nn.Module):
+    """A stand-in energy for the graph's logic: 0 for a move, 10 for one that crosses the wall x = 0 below y = 0.5."""
+
+    def forward(self, states: torch.Tensor, next_states: torch.Tensor) -> torch.Tensor:
+        crosses = (torch.sign(states[..., 0]) != torch.sign(next_states[..., 0])) & (
+            torch.maximum(states[..., 1], next_states[..., 1]) < 0.5
+        )
+        return 10.0 * crosses.float()  # [...]
+
+
+def _walk(seed: int = 0, steps: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+    """Random moves of at most 0.05 per axis in [-1, 1]^2 that never cross the wall: (states, next states)."""
+    rng = np.random.default_rng(seed)
+    states = rng.uniform(-1, 1, size=(steps, 2)).astype(np.float32)
+    states[np.abs(states[:, 0]) < 0.03, 0] += 0.06  # keep off the wall line
+    moves = rng.uniform(-0.05, 0.05, size=states.shape).astype(np.float32)
+    following = np.clip(states + moves, -1, 1)
+    blocked = (np.sign(states[:, 0]) != np.sign(following[:, 0])) & (np.maximum(states[:, 1], following[:, 1]) < 0.5)
+    following[blocked] = states[blocked]
+    return states, following
+
+
+def _graph(**kwargs) -> GraphSubgoals:
+    agent = SimpleNamespace(
+        energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
+    )
+    states, following = _walk()
+    return GraphSubgoals.from_transitions(agent, states, following, **kwargs)
+
+
+def test_paths_go_round_the_wall_the_energy_knows():
+    graph = _graph()
+    path = graph.path(np.array([-0.8, -0.8], np.float32), np.array([0.8, -0.8], np.float32))
+    assert len(path) > 0 and path[:, 1].max() > 0.5  # up and over: the wall ends at y = 0.5
+    crossings = np.sign(path[:-1, 0]) != np.sign(path[1:, 0])
+    assert np.all(np.maximum(path[:-1, 1], path[1:, 1])[crossings] >= 0.5)  # never through it
+    steps = np.abs(np.diff(path, axis=0)).max(axis=1)
+    assert steps.max() <= 0.05 + 1e-6  # each edge is one move
+
+
+def test_a_subgoal_lies_lookahead_moves_along_the_path_and_the_goal_itself_once_near():
+    graph = _graph(lookahead=5)
+    start, goal = np.array([[-0.8, -0.8]], np.float32), np.array([[0.8, -0.8]], np.float32)
+    subgoal = graph.subgoals(start, goal)[0]
+    path = graph.path(start[0], goal[0])
+    assert np.allclose(subgoal, path[5])
+    near = np.array([[0.78, -0.78]], np.float32)
+    assert np.allclose(graph.subgoals(near, goal), goal)
+
+
+def test_without_a_path_the_goal_is_kept():
+    agent = SimpleNamespace(
+        energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
+    )
+    states, following = _walk()
+    left = states[:, 0] < 0  # visited only the left half: the right half is not in the graph
+    graph = GraphSubgoals.from_transitions(agent, states[left & (states[:, 1] < 0.4)], following[left & (states[:, 1] < 0.4)])
+    goal = np.array([[0.8, -0.8]], np.float32)
+    # The goal's nearest node is on the left; a start beyond the graph's reach still gets a path or the goal.
+    out = graph.subgoals(np.array([[-0.5, -0.5]], np.float32), goal)
+    assert out.shape == (1, 2) and np.all(np.isfinite(out))
+    with pytest.raises(ValueError, match="non-empty"):
+        GraphSubgoals.from_transitions(agent, states[:0], following[:0])
+    with pytest.raises(ValueError, match="quantile"):
+        GraphSubgoals.from_transitions(agent, states, following, quantile=0.0)
+
+
+def test_the_agent_plans_towards_the_subgoals_and_does_not_save_them(tmp_path, monkeypatch):
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, planner_config={"num_samples": 8, "iterations": 2}
+    )
+    states, following = _walk(steps=4000)
+    agent.subgoals = GraphSubgoals.from_transitions(agent, states, following)
+    seen = []
+    original = agent._plan
+
+    def spy(states, goals, *args, **kwargs):
+        seen.append(np.array(goals))
+        return original(states, goals, *args, **kwargs)
+
+    monkeypatch.setattr(agent, "_plan", spy)
+    obs, _ = gym.make("ebm/Maze-v0").reset(seed=0)
+    agent.predict(obs, deterministic=True)
+    expected = agent.subgoals.subgoals(obs["observation"][None], obs["desired_goal"][None])
+    assert np.allclose(seen[0], expected) and not np.allclose(seen[0], obs["desired_goal"][None])
+    monkeypatch.undo()  # the spy is an instance attribute: not something to save
+    agent.save(tmp_path / "model.zip")
+    assert EBMPlannerAgent.load(tmp_path / "model.zip", env=gym.make("ebm/Maze-v0")).subgoals is None
+
+
+def test_the_subgoal_graph_option_builds_the_graph_after_pretraining_and_rejects_unknown_keys():
+    from ebm_agent import collect_random_transitions
+
+    env = gym.make("ebm/Maze-v0", start=None)
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy", env, seed=0, planner_config={"num_samples": 8, "iterations": 2}, subgoal_graph={"lookahead": 4}
+    )
+    data = collect_random_transitions(env, 2000, seed=0)
+    agent.learn_offline(data, epochs=1)
+    assert isinstance(agent.subgoals, GraphSubgoals) and agent.subgoals.lookahead == 4 and len(agent.subgoals.nodes) > 10
+    with pytest.raises(ValueError, match="unknown"):
+        EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph={"radius": 2})
