@@ -1,28 +1,24 @@
-"""The agents the harness can train, by name: how to build each one and which extra callbacks it needs.
-
-Each factory imports its agent lazily, inside the function, so that ``import eval`` works before (and
-without) every agent package, and a process-pool worker imports only the agent it runs.
-"""
+"""The agents the harness can train, by name: how to build each one and which extra callbacks it needs."""
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 import gymnasium as gym
 from stable_baselines3 import PPO, SAC, HerReplayBuffer
+from stable_baselines3.common.base_class import BaseAlgorithm
+from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.env_util import make_vec_env
 
+from baselines.action_ff import ActionFFAgent
 from baselines.ppo import exact_budget_callback, make_ppo, ppo_hyperparams
+from baselines.random_agent import RandomAgent
 from baselines.sac_her import make_sac_her, off_policy_budget_callback, sac_her_hyperparams
+from ebm_agent.agent import EBMPlannerAgent
 from ebm_agent.presets import preset_settings
 from eval.digest import class_defaults, env_inverse_dynamics_defaults
-
-if TYPE_CHECKING:  # SB3 (and torch) load only when an agent is built, so `ebm-eval --help` answers at once
-    from stable_baselines3.common.base_class import BaseAlgorithm
-    from stable_baselines3.common.callbacks import BaseCallback
 
 
 class AgentFactory(Protocol):
@@ -75,13 +71,9 @@ class AgentSpec:
     class_name: str | None = None
 
 
-def _class_defaults_of(
-    module: str, class_name: str, env_inverse_dynamics: bool = False
-) -> Callable[[str, str], dict[str, Any]]:
+def _class_defaults_of(agent_class: type, env_inverse_dynamics: bool = False) -> Callable[[str, str], dict[str, Any]]:
     def defaults(env_id: str, preset: str = "") -> dict[str, Any]:
-
-        agent_class = getattr(importlib.import_module(module), class_name)
-        settings = class_defaults(agent_class, preset_settings(preset, class_name))
+        settings = class_defaults(agent_class, preset_settings(preset, agent_class.__name__))
         if env_inverse_dynamics:
             changed = env_inverse_dynamics_defaults(env_id)
             if changed:  # only then: the digests of runs on other envs stay as they were
@@ -132,13 +124,10 @@ def _training_env(env_id: str, env_kwargs: dict[str, Any], seed: int, hyperparam
     return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
 
 
-def _class_factory(module: str, class_name: str, description: str) -> AgentFactory:
+def _class_factory(agent_class: type, description: str) -> AgentFactory:
     """A factory for an agent class with the SB3 constructor ``Agent(policy, env, seed=..., ...)``.
 
-    The class is imported when the factory runs, so importing ``eval`` never imports an agent package.
-
-    :param module: module holding the class.
-    :param class_name: the class.
+    :param agent_class: the class.
     :param description: the factory's docstring.
     :return: the factory.
     """
@@ -152,7 +141,6 @@ def _class_factory(module: str, class_name: str, description: str) -> AgentFacto
         hyperparams: dict[str, Any],
         verbose: int = 0,
     ) -> BaseAlgorithm:
-        agent_class = getattr(importlib.import_module(module), class_name)
         env = _training_env(env_id, env_kwargs, seed, hyperparams)
         policy = _policy_for(env_id, env_kwargs)
         return agent_class(
@@ -160,17 +148,15 @@ def _class_factory(module: str, class_name: str, description: str) -> AgentFacto
         )
 
     factory.__doc__ = description
-    factory.__name__ = f"make_{class_name}"
+    factory.__name__ = f"make_{agent_class.__name__}"
     return factory
 
 
-make_ebm = _class_factory(
-    "ebm_agent.agent", "EBMPlannerAgent", "Build the EBM planning agent (single env unless ``n_envs`` is given)."
-)
+make_ebm = _class_factory(EBMPlannerAgent, "Build the EBM planning agent (single env unless ``n_envs`` is given).")
 make_action_ff = _class_factory(
-    "baselines.action_ff", "ActionFFAgent", "Build the action-conditioned feed-forward baseline (same API as the EBM agent)."
+    ActionFFAgent, "Build the action-conditioned feed-forward baseline (same API as the EBM agent)."
 )
-make_random = _class_factory("baselines.random_agent", "RandomAgent", "Build the uniform random-exploration agent.")
+make_random = _class_factory(RandomAgent, "Build the uniform random-exploration agent.")
 
 
 def make_ppo_agent(
@@ -245,7 +231,7 @@ AGENTS: dict[str, AgentSpec] = {
         make_ebm,
         "EBM",
         description="energy-based planner (the agent under test)",
-        defaults=_class_defaults_of("ebm_agent.agent", "EBMPlannerAgent", env_inverse_dynamics=True),
+        defaults=_class_defaults_of(EBMPlannerAgent, env_inverse_dynamics=True),
         class_name="EBMPlannerAgent",
     ),
     "ppo": AgentSpec(
@@ -259,7 +245,7 @@ AGENTS: dict[str, AgentSpec] = {
         make_action_ff,
         "ActionFF",
         description="action-conditioned feed-forward model + MPPI",
-        defaults=_class_defaults_of("baselines.action_ff", "ActionFFAgent"),
+        defaults=_class_defaults_of(ActionFFAgent),
         class_name="ActionFFAgent",
     ),
     "sac-her": AgentSpec(
@@ -273,7 +259,7 @@ AGENTS: dict[str, AgentSpec] = {
         make_random,
         "Random",
         description="uniform random actions (exploration baseline)",
-        defaults=_class_defaults_of("baselines.random_agent", "RandomAgent"),
+        defaults=_class_defaults_of(RandomAgent),
     ),
 }
 """Agent names accepted by ``--agents`` / ``--baseline``, mapped to their specs. Tests may register more."""
