@@ -48,9 +48,10 @@ class GraphSubgoals:
     :param lookahead: edges along the path to the subgoal (about the plan's horizon).
     :param energy_threshold: the energy below which a move is allowed (a quantile of real transitions' energies).
     :param energy: ``energy(states [K, D], next_states [K, D]) -> [K]`` numpy energies, or None. With it, a subgoal is
-        the farthest path node within ``lookahead`` whose straight approach from the state the energy allows (every
-        move of at most one cell along the segment under ``energy_threshold``), so that plans do not cut corners
-        through walls; without it, the node ``lookahead`` edges along.
+        the farthest path node within ``lookahead`` in sight of the state: the straight segment to it stays in visited
+        cells and the energy allows each move of at most one cell along it (under ``energy_threshold``), so that plans
+        do not cut corners through walls; without it, the node ``lookahead`` edges along.
+    :param cell: the grid's cell side, in units of ``step``.
     """
 
     nodes: np.ndarray
@@ -62,10 +63,12 @@ class GraphSubgoals:
     energy: Any = None
     cell: float = 0.75
     _tree: cKDTree = field(init=False, repr=False)
+    _cells: set[tuple[int, ...]] = field(init=False, repr=False)
     _paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False)
 
     def __post_init__(self) -> None:
         self._tree = cKDTree(self.nodes / self.step)  # Chebyshev queries in units of one step
+        self._cells = set(map(tuple, self._cell_of(self.nodes).tolist()))  # the visited cells
 
     @classmethod
     def from_transitions(
@@ -160,8 +163,10 @@ class GraphSubgoals:
         for node in reversed(path[1:]):
             segment = self.nodes[node] - state  # [D]
             moves = max(int(np.ceil(np.abs(segment / (self.cell * self.step)).max())), 1)
-            points = state + np.linspace(0.0, 1.0, moves + 1)[:, None] * segment  # [moves + 1, D]
-            if np.all(self.energy(points[:-1].astype(np.float32), points[1:].astype(np.float32)) <= self.energy_threshold):
+            points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
+            if not all(cell in self._cells for cell in map(tuple, self._cell_of(points[1:]).tolist())):
+                continue  # the segment leaves the visited cells (into a wall, or where nothing was seen)
+            if np.all(self.energy(points[:-2:2].astype(np.float32), points[2::2].astype(np.float32)) <= self.energy_threshold):
                 return node
         return path[1] if len(path) > 1 else path[0]
 
@@ -182,6 +187,10 @@ class GraphSubgoals:
             node = int(toward[node])
             path.append(node)
         return self.nodes[path]
+
+    def _cell_of(self, points: np.ndarray) -> np.ndarray:
+        """[K, D] points -> [K, D] the integer indices of their grid cells."""
+        return np.floor(points / (self.cell * self.step)).astype(np.int64)
 
     def _goal_node(self, goal: np.ndarray) -> int:
         """The node nearest the goal in the goal dims."""

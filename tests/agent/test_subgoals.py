@@ -116,3 +116,29 @@ def test_the_subgoal_graph_option_builds_the_graph_after_pretraining_and_rejects
     assert isinstance(agent.subgoals, GraphSubgoals) and agent.subgoals.lookahead == 4 and len(agent.subgoals.nodes) > 10
     with pytest.raises(ValueError, match="unknown"):
         EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph={"radius": 2})
+
+
+def test_a_subgoal_is_never_across_cells_nobody_visited():
+    """A block no transition entered: the straight line to a subgoal must not cut through it, even when the energy
+    (here flat) would allow the move."""
+    rng = np.random.default_rng(1)
+    states = rng.uniform(-1, 1, size=(30_000, 2)).astype(np.float32)
+    outside = ~((np.abs(states[:, 0]) < 0.3) & (np.abs(states[:, 1]) < 0.3))  # the block [-0.3, 0.3]^2 is never visited
+    states = states[outside]
+    following = np.clip(states + rng.uniform(-0.05, 0.05, size=states.shape).astype(np.float32), -1, 1)
+    keep = ~((np.abs(following[:, 0]) < 0.3) & (np.abs(following[:, 1]) < 0.3))
+    class Flat(torch.nn.Module):
+        def forward(self, states: torch.Tensor, next_states: torch.Tensor) -> torch.Tensor:
+            return torch.zeros(states.shape[:-1])
+
+    flat = SimpleNamespace(
+        energy_model=Flat(),
+        device="cpu",
+        horizon=40,
+        goal_spec=SimpleNamespace(goal_indices=[0, 1]),
+    )
+    graph = GraphSubgoals.from_transitions(flat, states[keep], following[keep], lookahead=40)
+    start, goal = np.array([[-0.6, 0.0]], np.float32), np.array([[0.6, 0.0]], np.float32)
+    subgoal = graph.subgoals(start, goal)[0]
+    segment = start[0] + np.linspace(0, 1, 200)[:, None] * (subgoal - start[0])
+    assert not np.any((np.abs(segment[:, 0]) < 0.28) & (np.abs(segment[:, 1]) < 0.28))
