@@ -19,7 +19,7 @@ from eval.jobs import Job
 from eval.paper.data import paper_data
 from eval.presets import PRESET_DIR, load_preset
 
-AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random"}
+AGENT_LABELS = {"ebm": "EBM", "action-ff": "Action FF", "ppo": "PPO", "random": "Random", "sac-her": "SAC + HER"}
 """How agents are named in tables."""
 
 
