@@ -159,27 +159,43 @@ make_action_ff = _class_factory(
 make_random = _class_factory(RandomAgent, "Build the uniform random-exploration agent.")
 
 
-def make_ppo_agent(
-    env_id: str,
-    env_kwargs: dict[str, Any],
-    seed: int,
-    tensorboard_log: str | None,
-    device: str,
-    hyperparams: dict[str, Any],
-    verbose: int = 0,
-) -> BaseAlgorithm:
-    """Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``. See ``AgentFactory``."""
+def _table_factory(make: Callable[..., BaseAlgorithm], description: str) -> AgentFactory:
+    """A factory for a baseline built from its per-env table by ``make(env_id, seed=..., ..., **overrides)``, which
+    builds its own VecEnv with the table's ``n_envs`` (``n_envs`` in the hyperparameters overrides it).
 
-    # make_ppo builds its own VecEnv from the id, with the tuned n_envs (``n_envs`` in hyperparams overrides it).
-    return make_ppo(
-        env_id,
-        seed=seed,
-        tensorboard_log=tensorboard_log,
-        verbose=verbose,
-        device=device,
-        env_kwargs=env_kwargs or None,
-        **hyperparams,
-    )
+    :param make: ``baselines.ppo.make_ppo`` or ``baselines.sac_her.make_sac_her``.
+    :param description: the factory's docstring.
+    :return: the factory.
+    """
+
+    def factory(
+        env_id: str,
+        env_kwargs: dict[str, Any],
+        seed: int,
+        tensorboard_log: str | None,
+        device: str,
+        hyperparams: dict[str, Any],
+        verbose: int = 0,
+    ) -> BaseAlgorithm:
+        return make(
+            env_id,
+            seed=seed,
+            tensorboard_log=tensorboard_log,
+            verbose=verbose,
+            device=device,
+            env_kwargs=env_kwargs or None,
+            **hyperparams,
+        )
+
+    factory.__doc__ = description
+    factory.__name__ = f"{make.__name__}_agent"
+    return factory
+
+
+make_ppo_agent = _table_factory(make_ppo, "Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``.")
+make_sac_her_agent = _table_factory(
+    make_sac_her, "Build SB3's SAC with a ``HerReplayBuffer`` and the per-env hyperparameters of ``baselines.sac_her``."
+)
 
 
 def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
@@ -190,29 +206,6 @@ def ppo_callbacks(total_timesteps: int) -> list[BaseCallback]:
     """
 
     return [exact_budget_callback(total_timesteps)]
-
-
-def make_sac_her_agent(
-    env_id: str,
-    env_kwargs: dict[str, Any],
-    seed: int,
-    tensorboard_log: str | None,
-    device: str,
-    hyperparams: dict[str, Any],
-    verbose: int = 0,
-) -> BaseAlgorithm:
-    """Build SB3's SAC with a ``HerReplayBuffer`` and the per-env hyperparameters of ``baselines.sac_her``. See
-    ``AgentFactory``."""
-
-    return make_sac_her(
-        env_id,
-        seed=seed,
-        tensorboard_log=tensorboard_log,
-        verbose=verbose,
-        device=device,
-        env_kwargs=env_kwargs or None,
-        **hyperparams,
-    )
 
 
 def sac_her_callbacks(total_timesteps: int) -> list[BaseCallback]:
