@@ -36,7 +36,7 @@ from eval.provenance import read_json_dict
 
 CELL_FIELDS = frozenset(
     {
-        "setting", "env", "agent", "variant", "paper", "mode", "dataset", "budget_multiple", "env_kwargs", "eval_env_kwargs",
+        "setting", "env", "agent", "variant", "paper", "mode", "dataset", "budget_multiple", "env_kwargs", "eval_env_kwargs", "offline_kwargs",
         "hyperparams", "extra_evaluations", "evaluation", "paper_note", "preset", "key", "why",
     }
 )  # fmt: skip

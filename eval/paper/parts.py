@@ -229,6 +229,7 @@ def make_cell(
     budget_multiple: int = 1,
     env_kwargs: dict[str, Any] | None = None,
     eval_env_kwargs: dict[str, Any] | None = None,
+    offline_kwargs: dict[str, Any] | None = None,
     hyperparams: dict[str, Any] | None = None,
     extra_evaluations: dict[str, dict[str, Any]] | None = None,
     evaluation: str | None = None,
@@ -252,6 +253,8 @@ def make_cell(
     :param env_kwargs: kwargs of the training and evaluation envs, over the scale's.
     :param eval_env_kwargs: kwargs of the evaluation env only, over those (e.g. the paper's start for an agent
         trained from random starts).
+    :param offline_kwargs: pretrained only: ``learn_offline`` settings over the scale's (``{epochs: 0}``: the
+        dataset without training, for a control).
     :param hyperparams: agent keyword arguments, over the preset's and the scale's.
     :param extra_evaluations: extra evaluations of every run.
     :param evaluation: the extra evaluation whose score stands for the cell.
@@ -277,6 +280,7 @@ def make_cell(
     collector: dict[str, Any] = {}
     if pretrained:
         offline = dict(scale.sequential_kwargs if dataset == "directed+sequential" else scale.offline_kwargs)
+        offline.update(offline_kwargs or {})
         if dataset != "random":
             collector = {**preset_hyperparams(env).get("ebm", {}), **scale.hyperparams.get("ebm", {})}
     jobs = tuple(
