@@ -148,8 +148,12 @@ def cells_table(results: Sequence[CellResult]) -> str:
         if not len(scores) and result.retired:
             ours = f"rerun pending ({result.retired} run(s) made with earlier library defaults)"
         seeds = f"{len(scores)}/{len(cell.jobs)}" if len(scores) < len(cell.jobs) else str(len(scores))
-        successes = [float(m["success_rate"]) for _, m in result.runs if m.get("success_rate") is not None]
-        successes = successes if cell.evaluation is None else []
+        # The success of the evaluation that stands for the cell: the run's own, or an extra evaluation's.
+        evaluations = [
+            m if cell.evaluation is None else (m.get("extra_evaluations") or {}).get(cell.evaluation) or {}
+            for _, m in result.runs
+        ]
+        successes = [float(e["success_rate"]) for e in evaluations if e.get("success_rate") is not None]
         success = f"{np.mean(successes):.2f}" if successes else "-"
         rows.append([cell.setting, cell.env, cell.label, ours, seeds, _iqm(scores), success, _paper(cell)])
     header = ["setting", "env", "agent", "ours: mean ± std over seeds", "seeds", "IQM [95% CI]", "success", "paper"]
