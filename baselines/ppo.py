@@ -11,31 +11,17 @@ exactly ``total`` when it is a multiple of ``n_envs``, otherwise fewer than ``n_
 
 from __future__ import annotations
 
-import copy
 import inspect
 import numbers
-import warnings
 from typing import Any
 
 import gymnasium as gym
-import torch.nn as nn
 from gymnasium import spaces
 from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.env_util import make_vec_env
-from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import VecEnv
 
-from baselines.hyperparams import PPO_HYPERPARAMS
-
-_ACTIVATIONS: dict[str, type[nn.Module]] = {
-    "tanh": nn.Tanh,
-    "relu": nn.ReLU,
-    "elu": nn.ELU,
-    "leaky_relu": nn.LeakyReLU,
-    "gelu": nn.GELU,
-    "silu": nn.SiLU,
-}
+from baselines.hyperparams import PPO_HYPERPARAMS, env_id_of, policy_kwargs, schedule, table_entry, training_env
 
 # Arguments make_ppo sets itself; everything else in PPO's constructor may come from the table or an override.
 _OWN_ARGUMENTS = {"self", "policy", "env", "seed", "tensorboard_log", "verbose", "device", "_init_setup_model"}
@@ -54,14 +40,7 @@ def ppo_hyperparams(env_id: str) -> dict[str, Any]:
     :param env_id: a registered id (``ebm/Particle-v0``) or a short name (``particle``).
     :return: a fresh dict (mutating it does not change the table).
     """
-    env_id = _resolve(env_id)
-    params = copy.deepcopy(PPO_HYPERPARAMS["default"])
-    entry = copy.deepcopy(PPO_HYPERPARAMS.get(env_id, {}))
-    # policy_kwargs merge key by key so an entry can change one of them (say log_std_init) and keep the rest.
-    entry_policy_kwargs = entry.pop("policy_kwargs", {})
-    params.update(entry)
-    params["policy_kwargs"] = {**params.get("policy_kwargs", {}), **entry_policy_kwargs}
-    return params
+    return table_entry(PPO_HYPERPARAMS, env_id)
 
 
 def make_ppo(
@@ -94,32 +73,16 @@ def make_ppo(
             f"make_ppo() got unknown hyperparameter(s) {unknown}; valid keys are {sorted(VALID_HYPERPARAMS)}. "
             "Pass PPO constructor arguments, n_envs or policy."
         )
-    env_id = _env_id_of(env)
+    env_id = env_id_of(env)
     params = ppo_hyperparams(env_id) if env_id is not None else ppo_hyperparams("default")
     params.update(overrides)
     n_envs = int(params.pop("n_envs"))
     # Turn the table's plain data into what PPO takes, before any env is built, so bad values fail fast.
     for key in ("learning_rate", "clip_range", "clip_range_vf"):
         if isinstance(params.get(key), str):
-            params[key] = _schedule(key, params[key])
-    params["policy_kwargs"] = _policy_kwargs(params.get("policy_kwargs") or {})
-
-    if isinstance(env, str):
-        if n_envs < 1:
-            raise ValueError(f"n_envs must be >= 1, got {n_envs}.")
-        vec_env: VecEnv | gym.Env = make_vec_env(_resolve(env), n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
-    else:
-        if env_kwargs is not None:
-            raise ValueError("env_kwargs only applies when env is given by name; build the env with them instead.")
-        given_n_envs = env.num_envs if isinstance(env, VecEnv) else 1
-        if given_n_envs != n_envs:
-            warnings.warn(
-                f"The given env has {given_n_envs} env(s) but the tuned PPO settings for {env_id or 'default'} use "
-                f"n_envs={n_envs}; rollouts will hold {given_n_envs} x n_steps transitions. Pass the env by name "
-                "to get the tuned number of envs.",
-                stacklevel=2,
-            )
-        vec_env = env
+            params[key] = schedule(key, params[key])
+    params["policy_kwargs"] = policy_kwargs(params.get("policy_kwargs") or {})
+    vec_env = training_env(env, n_envs, seed, env_kwargs, "the tuned PPO settings")
 
     policy = params.pop("policy", None) or _default_policy(vec_env.observation_space)
     return PPO(policy, vec_env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, device=device, **params)
@@ -169,47 +132,8 @@ class ExactBudgetCallback(BaseCallback):
         return False
 
 
-def _resolve(env_id: str) -> str:
-    # The env package registers the ebm/ ids on import; imported lazily so this module does not need envs/.
-    from envs import resolve_env_id
-
-    return resolve_env_id(env_id)
-
-
-def _env_id_of(env: str | gym.Env | VecEnv) -> str | None:
-    if isinstance(env, str):
-        return _resolve(env)
-    if isinstance(env, VecEnv):
-        specs = env.get_attr("spec", indices=[0])
-        spec = specs[0] if specs else None
-    else:
-        spec = env.spec
-    return spec.id if spec is not None else None
-
-
 def _default_policy(observation_space: spaces.Space) -> str:
     return "MultiInputPolicy" if isinstance(observation_space, spaces.Dict) else "MlpPolicy"
-
-
-def _schedule(key: str, value: str) -> LinearSchedule:
-    # rl-zoo3's "lin_<start>": decays linearly from <start> to 0 over the whole of learn().
-    if not value.startswith("lin_"):
-        raise ValueError(f"{key}={value!r}: a string schedule must look like 'lin_3e-4' (linear decay to 0).")
-    try:
-        start = float(value[len("lin_") :])
-    except ValueError as error:
-        raise ValueError(f"{key}={value!r}: cannot read the number after 'lin_'.") from error
-    return LinearSchedule(start=start, end=0.0, end_fraction=1.0)
-
-
-def _policy_kwargs(policy_kwargs: dict[str, Any]) -> dict[str, Any]:
-    policy_kwargs = dict(policy_kwargs)
-    activation = policy_kwargs.get("activation_fn")
-    if isinstance(activation, str):
-        if activation.lower() not in _ACTIVATIONS:
-            raise ValueError(f"activation_fn={activation!r} is not one of {sorted(_ACTIVATIONS)}; or pass a torch.nn class.")
-        policy_kwargs["activation_fn"] = _ACTIVATIONS[activation.lower()]
-    return policy_kwargs
 
 
 __all__ = ["VALID_HYPERPARAMS", "ExactBudgetCallback", "exact_budget_callback", "make_ppo", "ppo_hyperparams"]

@@ -17,27 +17,24 @@ Step accounting: with 1 env and ``train_freq=1`` (every table entry), SB3's off-
 
 from __future__ import annotations
 
-import copy
 import inspect
-import warnings
-from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
-import yaml
 from gymnasium import spaces
 from stable_baselines3 import SAC, HerReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
 from stable_baselines3.common.vec_env import VecEnv
 
-from baselines.ppo import ExactBudgetCallback, _env_id_of, _policy_kwargs, _resolve, _schedule
+from baselines.hyperparams import TABLE_DIR, env_id_of, load_table, policy_kwargs, schedule, table_entry, training_env
+from baselines.ppo import ExactBudgetCallback
+from envs import resolve_env_id
 
-SAC_HER_HYPERPARAMS_FILE = Path(__file__).with_name("sac_her.yaml")
+SAC_HER_HYPERPARAMS_FILE = TABLE_DIR / "sac_her.yaml"
 """The SAC + HER table."""
 
-SAC_HER_HYPERPARAMS: dict[str, dict[str, Any]] = yaml.safe_load(SAC_HER_HYPERPARAMS_FILE.read_text())
+SAC_HER_HYPERPARAMS: dict[str, dict[str, Any]] = load_table("sac_her")
 """SAC + HER hyperparameters per Gymnasium id; ``default`` fills in whatever an entry leaves out."""
 
 GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
@@ -69,17 +66,10 @@ def sac_her_hyperparams(env_id: str) -> dict[str, Any]:
     :return: a fresh dict (mutating it does not change the table).
     :raises ValueError: when the table's entry (or ``default``) holds a key SAC does not take.
     """
-    env_id = _resolve(env_id)
-    params = copy.deepcopy(SAC_HER_HYPERPARAMS["default"])
-    entry = copy.deepcopy(SAC_HER_HYPERPARAMS.get(env_id, {}))
-    for name, table_entry in (("default", params), (env_id, entry)):
-        _check_keys(table_entry, f"{SAC_HER_HYPERPARAMS_FILE.name} entry {name!r}", ValueError)
-    # The two kwargs dicts merge key by key so an entry can change one of them (say net_arch) and keep the rest.
-    for nested in ("policy_kwargs", "replay_buffer_kwargs"):
-        entry_nested = entry.pop(nested, {})
-        params[nested] = {**params.get(nested, {}), **entry_nested}
-    params.update(entry)
-    return params
+    env_id = resolve_env_id(env_id)
+    for name in ("default", env_id):
+        _check_keys(SAC_HER_HYPERPARAMS.get(name, {}), f"{SAC_HER_HYPERPARAMS_FILE.name} entry {name!r}", ValueError)
+    return table_entry(SAC_HER_HYPERPARAMS, env_id, nested=("policy_kwargs", "replay_buffer_kwargs"))
 
 
 def make_sac_her(
@@ -111,33 +101,18 @@ def make_sac_her(
     :raises ValueError: for a non-goal env, or ``learning_starts`` shorter than the env's time limit.
     """
     _check_keys(overrides, "make_sac_her()", TypeError)
-    env_id = _env_id_of(env)
+    env_id = env_id_of(env)
     params = sac_her_hyperparams(env_id) if env_id is not None else sac_her_hyperparams("default")
     params.update(overrides)
     n_envs = int(params.pop("n_envs"))
     # Turn the table's plain data into what SAC takes, before any env is built, so bad values fail fast.
     if isinstance(params.get("learning_rate"), str):
-        params["learning_rate"] = _schedule("learning_rate", params["learning_rate"])
+        params["learning_rate"] = schedule("learning_rate", params["learning_rate"])
     if isinstance(params.get("train_freq"), list):  # YAML has no tuples: [1, "episode"] -> (1, "episode")
         params["train_freq"] = tuple(params["train_freq"])
-    params["policy_kwargs"] = _policy_kwargs(params.get("policy_kwargs") or {})
+    params["policy_kwargs"] = policy_kwargs(params.get("policy_kwargs") or {})
     params["replay_buffer_kwargs"] = dict(params.get("replay_buffer_kwargs") or {})
-
-    if isinstance(env, str):
-        if n_envs < 1:
-            raise ValueError(f"n_envs must be >= 1, got {n_envs}.")
-        vec_env: VecEnv | gym.Env = make_vec_env(_resolve(env), n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
-    else:
-        if env_kwargs is not None:
-            raise ValueError("env_kwargs only applies when env is given by name; build the env with them instead.")
-        given_n_envs = env.num_envs if isinstance(env, VecEnv) else 1
-        if given_n_envs != n_envs:
-            warnings.warn(
-                f"The given env has {given_n_envs} env(s) but the SAC + HER settings for {env_id or 'default'} use "
-                f"n_envs={n_envs}. Pass the env by name to get the table's number of envs.",
-                stacklevel=2,
-            )
-        vec_env = env
+    vec_env = training_env(env, n_envs, seed, env_kwargs, "the SAC + HER settings")
     _check_goal_env(vec_env, int(params.get("learning_starts", 100)))
 
     policy = params.pop("policy", None) or "MultiInputPolicy"

@@ -185,7 +185,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         if subgoal_graph is not None:
-            unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS)
+            unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
             if not isinstance(subgoal_graph, dict) or unknown:
                 raise ValueError(
                     f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "

@@ -52,6 +52,7 @@ __all__ = [
     "measure_reach",
     "next_state_rank",
     "sample_valid_states",
+    "transition_energies",
 ]
 
 EnergyFn = Callable[[Tensor, Tensor], Tensor]
@@ -184,7 +185,7 @@ def feasibility_auroc(
     moves = rng.uniform(-1.0, 1.0, size=states.shape) * radius  # [N, D]
     next_states = (states + moves).astype(np.float32)  # [N, D]
     feasible = label_moves(env, states, next_states)  # [N]
-    energies = _energies(agent, states, next_states)  # [N]
+    energies = transition_energies(agent, states, next_states)  # [N]
     infeasible = ~feasible
     return FeasibilityResult(
         auroc=auroc(energies, infeasible),
@@ -243,7 +244,9 @@ def next_state_rank(
     candidates = next_states[:, None, :] + rng.standard_normal((num, n_candidates, dim)) * noise_std  # [N, K, D]
     pairs_next = np.concatenate([next_states[:, None, :], candidates.astype(np.float32)], axis=1)  # [N, 1 + K, D]
     pairs_states = np.broadcast_to(states[:, None, :], pairs_next.shape)  # [N, 1 + K, D]
-    energies = _energies(agent, pairs_states.reshape(-1, dim), pairs_next.reshape(-1, dim)).reshape(num, -1)  # [N, 1+K]
+    energies = transition_energies(agent, pairs_states.reshape(-1, dim), pairs_next.reshape(-1, dim)).reshape(
+        num, -1
+    )  # [N, 1+K]
     real, others = energies[:, :1], energies[:, 1:]  # [N, 1], [N, K]
     lower = (others < real).sum(axis=1)  # [N]
     ties = (others == real).sum(axis=1)  # [N]
@@ -374,8 +377,15 @@ def _energy_fn(agent: Any) -> EnergyFn:
     return model  # type: ignore[no-any-return]
 
 
-def _energies(agent: Any, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
-    """E(s, s') of [N, D] pairs as float64 [N], in eval mode (a spectral norm's power iteration must not run)."""
+def transition_energies(agent: Any, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
+    """E(s, s') of [N, D] pairs as float64 [N], without gradients, in chunks and in eval mode (a spectral norm's power
+    iteration must not run); the model's mode is restored.
+
+    :param agent: an agent with ``energy_model``, or an energy callable.
+    :param states: [N, D].
+    :param next_states: [N, D].
+    :return: [N] energies.
+    """
     model = _energy_fn(agent)
     was_training = isinstance(model, nn.Module) and model.training
     parameter = next(model.parameters(), None) if isinstance(model, nn.Module) else None

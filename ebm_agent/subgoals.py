@@ -23,14 +23,16 @@ Usage::
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-import torch
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
+
+from ebm_agent.probe import transition_energies
 
 __all__ = ["GraphSubgoals"]
 
@@ -116,7 +118,7 @@ class GraphSubgoals:
         if len(occupied) > max_nodes:
             occupied = occupied[np.sort(rng.choice(len(occupied), max_nodes, replace=False))]
         nodes = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
-        energy = _energy_fn(agent)
+        energy = functools.partial(transition_energies, agent)
         sample = rng.choice(len(states), min(len(states), 20_000), replace=False)
         threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
         pairs = cKDTree(occupied).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2] neighbouring cells
@@ -211,23 +213,3 @@ class GraphSubgoals:
             if np.isfinite(distance[int(node)]):
                 return int(node)
         return None
-
-
-def _energy_fn(agent: Any) -> Any:
-    """E(states [K, D], next_states [K, D]) -> [K] numpy energies of the agent's model, in chunks, without gradients."""
-    model = agent.energy_model
-    device = getattr(agent, "device", "cpu")
-
-    def energy(states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
-        training = model.training
-        model.eval()
-        out = []
-        with torch.no_grad():
-            for start in range(0, len(states), 65_536):
-                s = torch.as_tensor(states[start : start + 65_536], device=device)
-                n = torch.as_tensor(next_states[start : start + 65_536], device=device)
-                out.append(model(s, n).float().cpu().numpy())
-        model.train(training)
-        return np.concatenate(out) if out else np.zeros(0, np.float32)
-
-    return energy

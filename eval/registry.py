@@ -117,53 +117,37 @@ def _policy_for(env_id: str, env_kwargs: dict[str, Any]) -> str:
         env.close()
 
 
-def _training_env(env_id: str, env_kwargs: dict[str, Any], seed: int, hyperparams: dict[str, Any]) -> Any:
-    """A Monitor-wrapped ``VecEnv`` with ``hyperparams.pop("n_envs", 1)`` copies of the env."""
+def _class_maker(agent_class: type) -> Callable[..., BaseAlgorithm]:
+    """``make(env_id, seed=..., ..., env_kwargs=None, **hyperparams)`` for an agent class with SB3's constructor
+    ``Agent(policy, env, seed=..., ...)``, on a Monitor-wrapped ``VecEnv`` of ``hyperparams.pop("n_envs", 1)`` envs."""
 
-    n_envs = int(hyperparams.pop("n_envs", 1))
-    return make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
-
-
-def _class_factory(agent_class: type, description: str) -> AgentFactory:
-    """A factory for an agent class with the SB3 constructor ``Agent(policy, env, seed=..., ...)``.
-
-    :param agent_class: the class.
-    :param description: the factory's docstring.
-    :return: the factory.
-    """
-
-    def factory(
+    def make(
         env_id: str,
-        env_kwargs: dict[str, Any],
         seed: int,
         tensorboard_log: str | None,
+        verbose: int,
         device: str,
-        hyperparams: dict[str, Any],
-        verbose: int = 0,
+        env_kwargs: dict[str, Any] | None = None,
+        **hyperparams: Any,
     ) -> BaseAlgorithm:
-        env = _training_env(env_id, env_kwargs, seed, hyperparams)
+        env_kwargs = env_kwargs or {}
+        env = make_vec_env(env_id, n_envs=int(hyperparams.pop("n_envs", 1)), seed=seed, env_kwargs=env_kwargs)
         policy = _policy_for(env_id, env_kwargs)
         return agent_class(
             policy, env, seed=seed, tensorboard_log=tensorboard_log, device=device, verbose=verbose, **hyperparams
         )
 
-    factory.__doc__ = description
-    factory.__name__ = f"make_{agent_class.__name__}"
-    return factory
+    make.__name__ = f"make_{agent_class.__name__}"
+    return make
 
 
-make_ebm = _class_factory(EBMPlannerAgent, "Build the EBM planning agent (single env unless ``n_envs`` is given).")
-make_action_ff = _class_factory(
-    ActionFFAgent, "Build the action-conditioned feed-forward baseline (same API as the EBM agent)."
-)
-make_random = _class_factory(RandomAgent, "Build the uniform random-exploration agent.")
+def _factory(make: Callable[..., BaseAlgorithm], description: str) -> AgentFactory:
+    """The harness's factory (``AgentFactory``) of an agent built by ``make(env_id, seed=..., tensorboard_log=...,
+    verbose=..., device=..., env_kwargs=..., **hyperparams)``: a class (:func:`_class_maker`) or a baseline built
+    from its per-env table (``baselines.ppo.make_ppo``, ``baselines.sac_her.make_sac_her``, which build their own
+    VecEnv with the table's ``n_envs``).
 
-
-def _table_factory(make: Callable[..., BaseAlgorithm], description: str) -> AgentFactory:
-    """A factory for a baseline built from its per-env table by ``make(env_id, seed=..., ..., **overrides)``, which
-    builds its own VecEnv with the table's ``n_envs`` (``n_envs`` in the hyperparameters overrides it).
-
-    :param make: ``baselines.ppo.make_ppo`` or ``baselines.sac_her.make_sac_her``.
+    :param make: the builder.
     :param description: the factory's docstring.
     :return: the factory.
     """
@@ -188,12 +172,19 @@ def _table_factory(make: Callable[..., BaseAlgorithm], description: str) -> Agen
         )
 
     factory.__doc__ = description
-    factory.__name__ = f"{make.__name__}_agent"
+    factory.__name__ = f"{make.__name__}_factory"
     return factory
 
 
-make_ppo_agent = _table_factory(make_ppo, "Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``.")
-make_sac_her_agent = _table_factory(
+make_ebm = _factory(_class_maker(EBMPlannerAgent), "Build the EBM planning agent (single env unless ``n_envs`` is given).")
+make_action_ff = _factory(
+    _class_maker(ActionFFAgent), "Build the action-conditioned feed-forward baseline (same API as the EBM agent)."
+)
+make_random = _factory(_class_maker(RandomAgent), "Build the uniform random-exploration agent.")
+
+
+make_ppo_agent = _factory(make_ppo, "Build SB3's PPO with the tuned per-env hyperparameters of ``baselines.ppo``.")
+make_sac_her_agent = _factory(
     make_sac_her, "Build SB3's SAC with a ``HerReplayBuffer`` and the per-env hyperparameters of ``baselines.sac_her``."
 )
 

@@ -161,14 +161,14 @@ class ResumeCheckpoint(BaseCallback):
 
     def _on_step(self) -> bool:
         steps = int(self.model.num_timesteps)
-        due = self._next is not None and steps >= self._next
+        due = False
+        if self.every is not None and self._next is not None and steps >= self._next:
+            due, self._next = True, (steps // self.every + 1) * self.every
         if self.after is not None and len(self.after.evaluations_timesteps) > self._evaluations:
             self._evaluations, due = len(self.after.evaluations_timesteps), True
         stopping = self.flag is not None and self.flag.requested
         if (due or stopping) and self.saved_at != steps:
             self.save()
-        if self._next is not None and self.every is not None and steps >= self._next:
-            self._next = (steps // self.every + 1) * self.every
         return not stopping
 
     def save(self) -> None:

@@ -22,6 +22,7 @@ pretraining, 3 seeds, 10 deterministic evaluation episodes, the paper's evaluati
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Sequence
 from fnmatch import fnmatchcase
 from pathlib import Path
@@ -34,12 +35,7 @@ from eval.paper.parts import SCALES, Cell, Context, Experiment, Part, figure_par
 from eval.pretraining import collection_checkpoint_dir
 from eval.provenance import read_json_dict
 
-CELL_FIELDS = frozenset(
-    {
-        "setting", "env", "agent", "variant", "paper", "mode", "dataset", "budget_multiple", "env_kwargs", "eval_env_kwargs", "offline_kwargs",
-        "hyperparams", "extra_evaluations", "evaluation", "paper_note", "preset", "key", "why",
-    }
-)  # fmt: skip
+CELL_FIELDS = frozenset(inspect.signature(make_cell).parameters) - {"context", "part"}
 """The fields a cell of ``paper.yaml`` may have (``eval.paper.parts.make_cell``'s arguments)."""
 
 

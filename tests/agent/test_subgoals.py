@@ -116,6 +116,8 @@ def test_the_subgoal_graph_option_builds_the_graph_after_pretraining_and_rejects
     assert isinstance(agent.subgoals, GraphSubgoals) and agent.subgoals.lookahead == 4 and len(agent.subgoals.nodes) > 10
     with pytest.raises(ValueError, match="unknown"):
         EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph={"radius": 2})
+    with pytest.raises(ValueError, match="must be None or a dict"):
+        EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph=10)
 
 
 def test_a_subgoal_is_never_across_cells_nobody_visited():
@@ -127,6 +129,7 @@ def test_a_subgoal_is_never_across_cells_nobody_visited():
     states = states[outside]
     following = np.clip(states + rng.uniform(-0.05, 0.05, size=states.shape).astype(np.float32), -1, 1)
     keep = ~((np.abs(following[:, 0]) < 0.3) & (np.abs(following[:, 1]) < 0.3))
+
     class Flat(torch.nn.Module):
         def forward(self, states: torch.Tensor, next_states: torch.Tensor) -> torch.Tensor:
             return torch.zeros(states.shape[:-1])
