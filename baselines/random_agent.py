@@ -22,6 +22,8 @@ from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import safe_mean
 from stable_baselines3.common.vec_env import VecEnv
 
+from ebm_agent.exploration import count_occupied_cells
+
 SelfRandomAgent = TypeVar("SelfRandomAgent", bound="RandomAgent")
 
 
@@ -301,36 +303,6 @@ class RandomAgent(BaseAlgorithm):
 
     def _elapsed(self) -> float:
         return max((time.time_ns() - self.start_time) / 1e9, sys.float_info.epsilon)
-
-
-def count_occupied_cells(
-    states: np.ndarray, bins: int | tuple[int, ...], low: float | np.ndarray, high: float | np.ndarray
-) -> int:
-    """Count the cells of a regular grid over the box [low, high] that contain at least one of ``states``.
-
-    :param states: points [M, G].
-    :param bins: cells per dimension (int or one per dimension, each >= 1).
-    :param low: lower corner, scalar or [G].
-    :param high: upper corner, scalar or [G]; points exactly on it fall in the last cell.
-    :return: number of occupied cells.
-    """
-    states = np.asarray(states, dtype=np.float64)
-    if states.ndim != 2:
-        raise ValueError(f"states must be [M, G], got shape {states.shape}.")
-    n_dims = states.shape[1]
-    bins_arr = np.broadcast_to(np.asarray(bins, dtype=np.int64), (n_dims,))
-    low_arr = np.broadcast_to(np.asarray(low, dtype=np.float64), (n_dims,))
-    high_arr = np.broadcast_to(np.asarray(high, dtype=np.float64), (n_dims,))
-    if np.any(bins_arr < 1):
-        raise ValueError(f"bins must be >= 1 in every dimension, got {bins}.")
-    if np.any(high_arr <= low_arr):
-        raise ValueError(f"high must exceed low in every dimension, got low={low}, high={high}.")
-    if len(states) == 0:
-        return 0
-    inside = np.all((states >= low_arr) & (states <= high_arr), axis=1)
-    cells = np.floor((states[inside] - low_arr) / (high_arr - low_arr) * bins_arr).astype(np.int64)  # [m, G]
-    cells = np.minimum(cells, bins_arr - 1)
-    return len(np.unique(cells, axis=0))
 
 
 def _observation_rows(observation: th.Tensor | dict[str, th.Tensor]) -> list[np.ndarray]:

@@ -1,28 +1,17 @@
 """The paper-figure experiments at smoke scale: PNGs, figure.json round trip, metric keys and sane values; the
-occupancy counts on scripted trajectories; the callbacks against the random agent's own record; reproducibility."""
+original's finger voxels on a scripted path; reproducibility; resuming a figure cut short."""
 
 from __future__ import annotations
 
 import json
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
-from stable_baselines3.common.env_util import make_vec_env
 
 import envs  # noqa: F401
-from baselines.random_agent import RandomAgent, count_occupied_cells
 from eval.paper.figures import FIGURES, FigureResult, budget_for, obstacle_optimum
-from eval.paper.figures.callbacks import (
-    VOXEL_CORNERS,
-    EnergyMapCallback,
-    VisitedStatesCallback,
-    grid_counts,
-    grid_coverage,
-    original_voxel_occupancy,
-)
-from eval.paper.figures.common import build_ebm
+from eval.paper.figures.exploration import VOXEL_CORNERS, original_voxel_occupancy
 
 SMOKE = budget_for("smoke")
 
@@ -155,36 +144,6 @@ def test_original_voxel_occupancy_on_a_scripted_finger_path():
     assert original_voxel_occupancy(np.array(inside + repeat + gaps + faces + outside)) == 10
     assert original_voxel_occupancy(np.array(gaps + faces + outside)) == 0
     assert original_voxel_occupancy(np.zeros((0, 3))) == 0
-
-
-def test_grid_counts_and_coverage_on_a_scripted_maze_path():
-    row = np.stack([np.linspace(-0.95, 0.95, 20), np.full(20, -0.95)], axis=1)  # the centre of each bottom-row cell
-    assert grid_coverage(np.concatenate([row, row])) == pytest.approx(20 / 400)
-    counts = grid_counts(np.array([[0.95, -0.95], [0.95, -0.95], [-0.95, 0.95]]))
-    assert counts.shape == (20, 20) and counts.sum() == 3
-    assert counts[0, 19] == 2 and counts[19, 0] == 1  # row index is y, column index is x
-
-
-def test_visited_states_callback_matches_the_random_agent_record_across_episode_ends():
-    env = make_vec_env("ebm/Particle-v0", n_envs=2, seed=0, env_kwargs={"max_episode_steps": 7})
-    agent = RandomAgent("MultiInputPolicy", env, seed=0)
-    measure = lambda states: count_occupied_cells(states, 20, -1.0, 1.0)  # noqa: E731
-    callback = VisitedStatesCallback([10, 20, 30], measure)
-    agent.learn(40, callback=callback)
-    assert agent._episode_num >= 4  # episodes ended, so terminal observations were recorded
-    np.testing.assert_array_equal(callback.visited_states, agent.visited_states)
-    np.testing.assert_array_equal(callback.visited_timesteps, agent.visited_timesteps)
-    assert callback.curve_timesteps == [10, 20, 30, 40]
-    assert callback.curve_values == [agent.occupancy(20, -1.0, 1.0, until_timestep=t) for t in (10, 20, 30, 40)]
-
-
-def test_energy_map_callback_snapshots_the_untrained_model_at_zero():
-    agent = build_ebm(gym.make("ebm/Particle-v0"), 0, SMOKE)
-    callback = EnergyMapCallback([0, 8], resolution=8, bins=4)
-    agent.learn(16, callback=callback)
-    assert [s.timestep for s in callback.snapshots] == [0, 8]
-    assert callback.snapshots[0].energies.shape == (8, 8) and callback.snapshots[0].cell_energies.shape == (4, 4)
-    assert callback.snapshots[0].visit_counts.sum() == 1  # only the first observation before training
 
 
 def test_a_figure_is_reproducible_from_its_seed(tmp_path):

@@ -30,10 +30,9 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from eval.paper.figures.callbacks import EnergyMapCallback, VisitedStatesCallback, grid_coverage, original_voxel_occupancy
 from eval.paper.figures.common import SCALES, FigureBudget, FigureResult, budget_for
 from eval.paper.figures.energy import energy_maps
-from eval.paper.figures.exploration import maze_exploration, sawyer_exploration
+from eval.paper.figures.exploration import maze_exploration, original_voxel_occupancy, sawyer_exploration
 from eval.paper.figures.obstacle import OBSTACLE_BOX, obstacle_generalisation, obstacle_optimum
 from eval.paper.figures.planning import plan_diversity, reacher_directions
 
@@ -51,13 +50,10 @@ __all__ = [
     "FIGURES",
     "OBSTACLE_BOX",
     "SCALES",
-    "EnergyMapCallback",
     "FigureBudget",
     "FigureResult",
-    "VisitedStatesCallback",
     "budget_for",
     "energy_maps",
-    "grid_coverage",
     "maze_exploration",
     "obstacle_generalisation",
     "obstacle_optimum",

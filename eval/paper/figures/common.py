@@ -166,6 +166,36 @@ def check_seeds(seeds: Sequence[int]) -> list[int]:
     return [int(s) for s in values]
 
 
+def prepare(out_dir: Path, seeds: Sequence[int], scale: str) -> tuple[Path, list[int], FigureBudget]:
+    """Check a figure experiment's seeds and scale and make its folder.
+
+    :param out_dir: the figure's folder (created).
+    :param seeds: its training seeds (:func:`check_seeds`).
+    :param scale: a key of ``SCALES``.
+    :return: (the folder, the seeds as a list, the scale's budget).
+    """
+    seeds, budget = check_seeds(seeds), budget_for(scale)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return out_dir, seeds, budget
+
+
+def finish(name: str, out_dir: Path, seeds: Sequence[int], scale: str, **drawn: Any) -> FigureResult:
+    """Save what a figure experiment produced as its ``figure.json``, with the command that reproduces it.
+
+    :param name: the figure, a key of ``eval.paper.figures.FIGURES``.
+    :param out_dir: its folder.
+    :param seeds: its seeds.
+    :param scale: its scale.
+    :param drawn: ``pngs``, ``metrics`` (made JSON-able here) and ``table_md`` of :class:`FigureResult`.
+    :return: the saved result.
+    """
+    metrics = to_jsonable(drawn["metrics"])
+    result = FigureResult(name, drawn["pngs"], metrics, drawn["table_md"], reproduce_command(name, scale, seeds))
+    result.save(out_dir)
+    return result
+
+
 def reproduce_command(name: str, scale: str, seeds: Sequence[int]) -> str:
     """The ``ebm-eval`` command line that reruns one figure experiment.
 
@@ -469,8 +499,10 @@ __all__ = [
     "figure_digest",
     "figure_seeds_kept",
     "figure_state",
+    "finish",
     "markdown_table",
     "paper_numbers",
+    "prepare",
     "pretrained_ebm",
     "recorded_figure_digests",
     "reproduce_command",

@@ -2,7 +2,7 @@
 
 An online EBM is trained on the particle (the registered env: random starts, goal (0.5, 0.5)) and on the maze
 without a goal (the exploration setting of the paper's figure). At evenly spaced points of training,
-:class:`~eval.paper.figures.callbacks.EnergyMapCallback` records the energy of a small diagonal move centred at every
+:class:`~ebm_agent.exploration.EnergyMapCallback` records the energy of a small diagonal move centred at every
 point of a grid (the original's ``--energy_heatmap``: E(c - 0.01, c + 0.01)) and the visits so far.
 
 The paper's claim is that energies stay put where the agent has been and keep changing where it has not, which
@@ -25,22 +25,20 @@ import gymnasium as gym
 import matplotlib.pyplot as plt
 import numpy as np
 
+from ebm_agent.exploration import EnergyMapCallback, EnergySnapshot, linear_checkpoints
 from envs.maze import maze_valid
-from eval.paper.figures.callbacks import EnergyMapCallback, EnergySnapshot, linear_checkpoints
 from eval.paper.figures.common import (
     FigureBudget,
     FigureResult,
-    budget_for,
     build_ebm,
-    check_seeds,
     figure_digest,
+    finish,
     markdown_table,
-    reproduce_command,
+    prepare,
     save_png,
     seed_result,
     seed_result_path,
     summary,
-    to_jsonable,
 )
 from eval.paper.figures.exploration import MAZE_BINS, NO_GOAL, free_cells
 from eval.paper.records import SEED_FOLDER
@@ -60,9 +58,7 @@ def energy_maps(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") ->
     :param scale: ``"paper"`` (50k transitions, 4 snapshots, 300 x 300 maps) or ``"smoke"``.
     :return: the result; ``metrics["envs"][env]`` holds per-snapshot energy statistics and the change measures.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     checkpoints = linear_checkpoints(budget.online_timesteps, budget.energy_snapshots)
     metrics: dict[str, Any] = {"seeds": seeds, "timesteps": budget.online_timesteps, "checkpoints": checkpoints, "envs": {}}
     pngs = []
@@ -97,11 +93,7 @@ def energy_maps(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") ->
             ]
         )
     header = ["env", "coverage", "E visited (last)", "E unvisited free (last)", "|ΔE| explored", "|ΔE| unexplored"]
-    result = FigureResult(
-        "energy_maps", pngs, to_jsonable(metrics), markdown_table(header, rows), reproduce_command("energy_maps", scale, seeds)
-    )
-    result.save(out_dir)
-    return result
+    return finish("energy_maps", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=markdown_table(header, rows))
 
 
 def _energy_run(

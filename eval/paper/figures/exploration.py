@@ -3,7 +3,7 @@
 The EBM explores with its goal energy switched off (``cost={"goal_weight": 0}``): plans follow the learned energy
 and the acceleration prior only, so where it goes is decided by the energy landscape, which is low on unexplored
 regions that training has not shaped yet (paper Sec. 3.3). Both agents consume the same number of transitions, and
-what they visit is recorded during training by :class:`~eval.paper.figures.callbacks.VisitedStatesCallback`.
+what they visit is recorded during training by :class:`~ebm_agent.exploration.VisitedStatesCallback`.
 
 - Maze: coverage = fraction of the cells of the original's 20 x 20 heatmap grid over [-1, 1]^2 with a visit (and,
   since the walls make some cells unreachable, the fraction of cells that hold free space). Random actions are
@@ -27,27 +27,18 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from baselines.random_agent import RandomAgent
+from ebm_agent.exploration import VisitedStatesCallback, grid_counts, grid_coverage, linear_checkpoints, log_checkpoints
 from envs.maze import maze_valid
-from eval.paper.figures.callbacks import (
-    VisitedStatesCallback,
-    grid_counts,
-    grid_coverage,
-    linear_checkpoints,
-    log_checkpoints,
-    original_voxel_occupancy,
-)
 from eval.paper.figures.common import (
     FigureResult,
-    budget_for,
     build_ebm,
-    check_seeds,
     figure_digest,
+    finish,
     markdown_table,
-    reproduce_command,
+    prepare,
     save_png,
     seed_result,
     summary,
-    to_jsonable,
 )
 
 MAZE_BINS = 20
@@ -59,6 +50,31 @@ ORIGINAL_CUT = 4000
 NO_GOAL = {"goal_weight": 0.0}
 """The EBM's cost without a goal: exploration follows the energy alone."""
 
+VOXEL_CORNERS = np.linspace(-1.0, 1.0, 10)
+"""Lower corners of the original's finger voxels on each axis (spacing 2/9 = 0.222)."""
+
+VOXEL_WIDTH = 0.2
+"""Width of each original finger voxel: narrower than the spacing, so the voxels leave 0.022 gaps."""
+
+
+def original_voxel_occupancy(points: np.ndarray) -> int:
+    """The original's finger occupancy: voxels with lower corners ``linspace(-1, 1, 10)`` per axis, 0.2 wide.
+
+    A voxel counts when some point lies *strictly* inside it (``train.py:569-577``). The voxels do not tile the
+    space: a point in a 0.022 gap between two voxels, or on a voxel face, counts for none.
+
+    :param points: [M, 3] finger positions.
+    :return: number of occupied voxels (at most 1000).
+    """
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    spacing = VOXEL_CORNERS[1] - VOXEL_CORNERS[0]
+    index = np.floor((points - VOXEL_CORNERS[0]) / spacing).astype(np.int64)  # [M, 3] the only candidate voxel
+    valid = (index >= 0) & (index < len(VOXEL_CORNERS))
+    corner = VOXEL_CORNERS[np.clip(index, 0, len(VOXEL_CORNERS) - 1)]  # [M, 3]
+    inside = valid & (points > corner) & (points < corner + VOXEL_WIDTH)
+    occupied = index[inside.all(axis=1)]
+    return len(np.unique(occupied, axis=0)) if len(occupied) else 0
+
 
 def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") -> FigureResult:
     """Coverage of the maze by the goal-free online EBM and by uniform random actions over the same transitions.
@@ -68,9 +84,7 @@ def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper
     :param scale: ``"paper"`` or ``"smoke"``.
     :return: the result; ``metrics["agents"][a]`` holds final coverage (mean/std/per seed) and the coverage curve.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     checkpoints = linear_checkpoints(budget.maze_timesteps, budget.curve_points)
     if ORIGINAL_CUT < budget.maze_timesteps:
         checkpoints = sorted({*checkpoints, ORIGINAL_CUT})
@@ -111,11 +125,7 @@ def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper
         for name in agents
     ]
     table = markdown_table(["agent", "coverage (all cells)", "coverage (cells with free space)"], rows)
-    result = FigureResult(
-        "maze_exploration", pngs, to_jsonable(metrics), table, reproduce_command("maze_exploration", scale, seeds)
-    )
-    result.save(out_dir)
-    return result
+    return finish("maze_exploration", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
 
 
 def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") -> FigureResult:
@@ -126,9 +136,7 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
     :param scale: ``"paper"`` (EBM 50k transitions, random 250k) or ``"smoke"``.
     :return: the result; ``metrics["agents"][a]`` holds final occupancy, its normalised value and the curve.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     runs: dict[str, list[Curve]] = {"ebm": [], "random_uniform": [], "random_joint_targets": []}
 
     def explore(seed: int) -> dict[str, Any]:
@@ -191,10 +199,8 @@ def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "pap
         for name in agents
     ]
     header = ["agent", "transitions", "voxels occupied", "% of (max random + 5)", f"voxels at {ebm_budget} transitions"]
-    command = reproduce_command("sawyer_exploration", scale, seeds)
-    result = FigureResult("sawyer_exploration", pngs, to_jsonable(metrics), markdown_table(header, rows), command)
-    result.save(out_dir)
-    return result
+    table = markdown_table(header, rows)
+    return finish("sawyer_exploration", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
 
 
 def _mean_std(numbers: dict[str, Any] | None) -> str:
@@ -298,4 +304,12 @@ def _plot_maze_heatmaps(visited: dict[str, np.ndarray], free: np.ndarray, path: 
     return save_png(figure, path)
 
 
-__all__ = ["count_cells", "free_cells", "maze_exploration", "sawyer_exploration"]
+__all__ = [
+    "VOXEL_CORNERS",
+    "VOXEL_WIDTH",
+    "count_cells",
+    "free_cells",
+    "maze_exploration",
+    "original_voxel_occupancy",
+    "sawyer_exploration",
+]

@@ -38,18 +38,16 @@ from envs.particle import ParticleEnv
 from eval.anchors import compute_anchors
 from eval.paper.figures.common import (
     FigureResult,
-    budget_for,
     build_ebm,
-    check_seeds,
     figure_digest,
+    finish,
     markdown_table,
     paper_numbers,
-    reproduce_command,
+    prepare,
     run_episode,
     save_png,
     seed_result,
     summary,
-    to_jsonable,
 )
 
 OBSTACLE_BOX = (0.1, 0.1, 0.4, 0.4)
@@ -80,9 +78,7 @@ def obstacle_generalisation(
     :param box: the obstacle (xmin, ymin, xmax, ymax).
     :return: the result; ``metrics["methods"][m]`` holds mean/std over seeds and episodes, per-seed means, success.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     eval_kwargs: dict[str, Any] = {"start": OBSTACLE_START, "goal": OBSTACLE_GOAL, "obstacle": tuple(box)}
     eval_env = gym.make("ebm/Particle-v0", **eval_kwargs)
     scores: dict[str, list[list[float]]] = {m: [] for m in METHODS}
@@ -149,15 +145,7 @@ def obstacle_generalisation(
         "paper": {method: paper[label] for method, label in (("ebm", "EBM"), ("action_ff", "Action FF"))},
     }
     png = _plot_paths(paths, box, out_dir / "obstacle_paths.png")
-    result = FigureResult(
-        "obstacle_generalisation",
-        [png],
-        to_jsonable(metrics),
-        _table(metrics),
-        reproduce_command("obstacle_generalisation", scale, seeds),
-    )
-    result.save(out_dir)
-    return result
+    return finish("obstacle_generalisation", out_dir, seeds, scale, pngs=[png], metrics=metrics, table_md=_table(metrics))
 
 
 class BoxAwareActionPlanner(ActionPlanner):

@@ -32,14 +32,12 @@ from ebm_agent.costs import AccelerationPrior, GoalEnergy
 from envs.reacher import fingertip_position, wrap_difference, wrapped_l1_distance
 from eval.paper.figures.common import (
     FigureResult,
-    budget_for,
-    check_seeds,
+    finish,
     markdown_table,
+    prepare,
     pretrained_ebm,
-    reproduce_command,
     save_png,
     summary,
-    to_jsonable,
 )
 
 DIVERSITY_START = (0.0, 0.0)
@@ -100,9 +98,7 @@ def plan_diversity(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper",
     :param goal_weight: weight of the Gaussian final-state goal (paper Eq. 6).
     :return: the result; ``metrics["horizons"][str(T)][metric]`` holds mean/std over seeds of each envelope measure.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     start, goal = np.asarray(DIVERSITY_START), np.asarray(DIVERSITY_GOAL)
     per_seed: dict[int, dict[str, list[float]]] = {h: {m: [] for m in DIVERSITY_METRICS} for h in budget.diversity_horizons}
     drawn: dict[int, np.ndarray] = {}
@@ -138,11 +134,7 @@ def plan_diversity(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper",
         for h in budget.diversity_horizons
     ]
     table = markdown_table(["horizon T", *DIVERSITY_METRICS], rows)
-    result = FigureResult(
-        "plan_diversity", pngs, to_jsonable(metrics), table, reproduce_command("plan_diversity", scale, seeds)
-    )
-    result.save(out_dir)
-    return result
+    return finish("plan_diversity", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
 
 
 def envelope_measures(plans: np.ndarray, start: np.ndarray, goal: np.ndarray) -> dict[str, float]:
@@ -187,9 +179,7 @@ def reacher_directions(
     :param reach_tolerance: wrapped L1 distance of the last planned angles to the goal under which a plan reaches it.
     :return: the result; ``metrics["cases"][case]`` holds the direction fractions and the execution agreement.
     """
-    seeds, budget = check_seeds(seeds), budget_for(scale)
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     cases: dict[str, dict[str, list[float]]] = {}
     pictures: dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
     for seed in seeds:
@@ -234,10 +224,7 @@ def reacher_directions(
     names = ["ccw_fraction", "cw_fraction", "reached_fraction", "executed_agreement", "mean_abs_turn"]
     rows = [[case, *(metrics["cases"][case][n]["mean"] for n in names)] for case in metrics["cases"]]
     table = markdown_table(["goal", *names], rows)
-    command = reproduce_command("reacher_directions", scale, seeds)
-    result = FigureResult("reacher_directions", pngs, to_jsonable(metrics), table, command)
-    result.save(out_dir)
-    return result
+    return finish("reacher_directions", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
 
 
 def shoulder_turn(angles: np.ndarray) -> np.ndarray:

@@ -1,11 +1,19 @@
-"""Measurements taken *during* training for the exploration and energy figures: SB3 callbacks and occupancy counts.
+"""Measuring exploration while any SB3 algorithm learns: visited states, grid coverage, energy snapshots.
 
+- :func:`count_occupied_cells`, :func:`grid_counts`, :func:`grid_coverage`: occupancy of a regular grid (the
+  original's maze heatmap is 20 x 20 over [-1, 1]^2).
 - :class:`VisitedStatesCallback` keeps every ``achieved_goal`` an agent sees and records an occupancy curve at
   chosen transition counts (logged as ``explore/occupancy``); it works with any SB3 algorithm whose ``learn`` puts
-  ``new_obs``, ``dones`` and ``infos`` in the callback locals (the EBM agent, Action FF, the random agent, PPO).
-- :class:`EnergyMapCallback` also snapshots the EBM's energy map and the visitation grid at those counts.
-- :func:`grid_counts` / :func:`grid_coverage` are the original's maze heatmap (20 x 20 over [-1, 1]^2) and
-  :func:`original_voxel_occupancy` its finger voxels (reference/original_code.md §8).
+  ``new_obs``, ``dones`` and ``infos`` in the callback locals (the EBM agent, Action FF, the random agent, PPO, SAC).
+- :class:`EnergyMapCallback` also snapshots a 2-D EBM's energy map and the visitation grid at those counts.
+
+Example, the coverage of the maze by PPO every 10,000 transitions::
+
+    from ebm_agent.exploration import VisitedStatesCallback, grid_coverage, linear_checkpoints
+
+    callback = VisitedStatesCallback(linear_checkpoints(50_000, 5), grid_coverage)
+    PPO("MultiInputPolicy", env).learn(50_000, callback=callback)
+    print(callback.curve_timesteps, callback.curve_values)
 """
 
 from __future__ import annotations
@@ -18,14 +26,37 @@ import numpy as np
 import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
-from baselines.random_agent import count_occupied_cells
 from ebm_agent.visualize import energy_map
 
-VOXEL_CORNERS = np.linspace(-1.0, 1.0, 10)
-"""Lower corners of the original's finger voxels on each axis (spacing 2/9 = 0.222)."""
 
-VOXEL_WIDTH = 0.2
-"""Width of each original finger voxel: narrower than the spacing, so the voxels leave 0.022 gaps."""
+def count_occupied_cells(
+    states: np.ndarray, bins: int | tuple[int, ...], low: float | np.ndarray, high: float | np.ndarray
+) -> int:
+    """Count the cells of a regular grid over the box [low, high] that contain at least one of ``states``.
+
+    :param states: points [M, G].
+    :param bins: cells per dimension (int or one per dimension, each >= 1).
+    :param low: lower corner, scalar or [G].
+    :param high: upper corner, scalar or [G]; points exactly on it fall in the last cell.
+    :return: number of occupied cells.
+    """
+    states = np.asarray(states, dtype=np.float64)
+    if states.ndim != 2:
+        raise ValueError(f"states must be [M, G], got shape {states.shape}.")
+    n_dims = states.shape[1]
+    bins_arr = np.broadcast_to(np.asarray(bins, dtype=np.int64), (n_dims,))
+    low_arr = np.broadcast_to(np.asarray(low, dtype=np.float64), (n_dims,))
+    high_arr = np.broadcast_to(np.asarray(high, dtype=np.float64), (n_dims,))
+    if np.any(bins_arr < 1):
+        raise ValueError(f"bins must be >= 1 in every dimension, got {bins}.")
+    if np.any(high_arr <= low_arr):
+        raise ValueError(f"high must exceed low in every dimension, got low={low}, high={high}.")
+    if len(states) == 0:
+        return 0
+    inside = np.all((states >= low_arr) & (states <= high_arr), axis=1)
+    cells = np.floor((states[inside] - low_arr) / (high_arr - low_arr) * bins_arr).astype(np.int64)  # [m, G]
+    cells = np.minimum(cells, bins_arr - 1)
+    return len(np.unique(cells, axis=0))
 
 
 def grid_counts(points: np.ndarray, bins: int = 20, low: float = -1.0, high: float = 1.0) -> np.ndarray:
@@ -53,25 +84,6 @@ def grid_coverage(points: np.ndarray, bins: int = 20, low: float = -1.0, high: f
     """
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
     return count_occupied_cells(points, bins, low, high) / bins**2
-
-
-def original_voxel_occupancy(points: np.ndarray) -> int:
-    """The original's finger occupancy: voxels with lower corners ``linspace(-1, 1, 10)`` per axis, 0.2 wide.
-
-    A voxel counts when some point lies *strictly* inside it (``train.py:569-577``). The voxels do not tile the
-    space: a point in a 0.022 gap between two voxels, or on a voxel face, counts for none.
-
-    :param points: [M, 3] finger positions.
-    :return: number of occupied voxels (at most 1000).
-    """
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    spacing = VOXEL_CORNERS[1] - VOXEL_CORNERS[0]
-    index = np.floor((points - VOXEL_CORNERS[0]) / spacing).astype(np.int64)  # [M, 3] the only candidate voxel
-    valid = (index >= 0) & (index < len(VOXEL_CORNERS))
-    corner = VOXEL_CORNERS[np.clip(index, 0, len(VOXEL_CORNERS) - 1)]  # [M, 3]
-    inside = valid & (points > corner) & (points < corner + VOXEL_WIDTH)
-    occupied = index[inside.all(axis=1)]
-    return len(np.unique(occupied, axis=0)) if len(occupied) else 0
 
 
 def linear_checkpoints(total: int, points: int) -> list[int]:
@@ -260,15 +272,13 @@ def cell_energies(energy: torch.nn.Module, bins: int, low: float, high: float, m
 
 
 __all__ = [
-    "VOXEL_CORNERS",
-    "VOXEL_WIDTH",
     "EnergyMapCallback",
     "EnergySnapshot",
     "VisitedStatesCallback",
     "cell_energies",
+    "count_occupied_cells",
     "grid_counts",
     "grid_coverage",
     "linear_checkpoints",
     "log_checkpoints",
-    "original_voxel_occupancy",
 ]
