@@ -12,7 +12,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback
 
 from ebm_agent.checkpoint_files import replace_with_link
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
-from ebm_agent.probe import FeasibilityResult, NextStateRankResult, can_label_feasibility, feasibility_auroc, next_state_rank
+from ebm_agent.probe import FeasibilityResult, NextStateRankResult, can_label_feasibility, model_quality
 
 
 class ResumableCheckpointCallback(CheckpointCallback):
@@ -157,30 +157,15 @@ class ModelProbeCallback(BaseCallback):
         assert self.held_out is not None, "the callback is not initialised: pass it to learn()"
         seed = self.seed + self.num_probes
         self.num_probes += 1
-        rank = next_state_rank(self.model, self.held_out, self.n_candidates, self.scale, seed=seed)
-        values = {"probe/next_state_rank": rank.top1, "probe/next_state_mean_rank": rank.mean_rank}
-        self.last_rank = rank
-        if self.can_label:
-            uniform = feasibility_auroc(self.model, self.eval_env, self.n_moves, seed=seed)
-            near = self._buffer_states(np.random.default_rng(seed))
-            feasibility = (
-                uniform if near is None else feasibility_auroc(self.model, self.eval_env, self.n_moves, near=near, seed=seed)
-            )
-            values.update({"probe/feasibility_auroc": feasibility.auroc, "probe/feasibility_auroc_uniform": uniform.auroc})
-            self.last_feasibility = feasibility
+        quality, self.last_feasibility, self.last_rank = model_quality(
+            self.model, self.eval_env, self.held_out, self.n_moves, self.n_candidates, self.scale, seed=seed
+        )
+        values = {f"probe/{key}": value for key, value in quality.items()}
         for key, value in values.items():
             self.logger.record(key, value)
         if self.verbose >= 1:
             print(f"probe at {self.num_timesteps} steps: " + ", ".join(f"{k} {v:.4f}" for k, v in values.items()))
         return values
-
-    def _buffer_states(self, rng: np.random.Generator) -> np.ndarray | None:
-        """Up to ``n_moves`` states of the agent's real-transition buffer (read by index: its own generator is untouched)."""
-        buffer = getattr(self.model, "pos_buffer", None)
-        if buffer is None or len(buffer) == 0:
-            return None
-        indices = rng.choice(len(buffer), size=min(len(buffer), self.n_moves), replace=False)  # [M]
-        return np.asarray(buffer.get(indices).states)
 
 
 __all__ = ["ModelProbeCallback", "ResumableCheckpointCallback", "latest_checkpoint"]

@@ -46,10 +46,12 @@ __all__ = [
     "FeasibilityResult",
     "NextStateRankResult",
     "auroc",
+    "buffer_states",
     "can_label_feasibility",
     "feasibility_auroc",
     "label_moves",
     "measure_reach",
+    "model_quality",
     "next_state_rank",
     "sample_valid_states",
     "transition_energies",
@@ -259,6 +261,57 @@ def next_state_rank(
         num_candidates=n_candidates,
         noise_std=noise_std,
     )
+
+
+def model_quality(
+    agent: Any,
+    env: gym.Env,
+    held_out: TransitionDataset,
+    n_moves: int = 2000,
+    n_candidates: int = 64,
+    scale: float = 1.0,
+    seed: int = 0,
+) -> tuple[dict[str, float], FeasibilityResult | None, NextStateRankResult]:
+    """Both measures at once, as :class:`~ebm_agent.callbacks.ModelProbeCallback` logs them and the harness records
+    them at the end of a run.
+
+    The feasibility AUROC is taken near the states of the agent's real-transition buffer (``pos_buffer``) when it
+    holds data (an online agent: the states it visited), else over uniform valid states; the uniform one always.
+
+    :param agent: an agent with an ``energy_model``.
+    :param env: a gymnasium env of the agent's task that nothing else steps.
+    :param held_out: held-out real transitions of the next-state rank.
+    :param n_moves: (state, move) samples of each feasibility AUROC.
+    :param n_candidates: perturbed candidates per transition of the rank.
+    :param scale: candidate noise, in std(s' - s).
+    :param seed: seeds the probe.
+    :return: (values by key: ``next_state_rank``, ``next_state_mean_rank`` and, where the env labels moves,
+        ``feasibility_auroc`` and ``feasibility_auroc_uniform``; the feasibility result or None; the rank result).
+    """
+    rank = next_state_rank(agent, held_out, n_candidates, scale, seed=seed)
+    values = {"next_state_rank": rank.top1, "next_state_mean_rank": rank.mean_rank}
+    if not can_label_feasibility(env):
+        return values, None, rank
+    uniform = feasibility_auroc(agent, env, n_moves, seed=seed)
+    near = buffer_states(agent, n_moves, np.random.default_rng(seed))
+    feasibility = uniform if near is None else feasibility_auroc(agent, env, n_moves, near=near, seed=seed)
+    values.update({"feasibility_auroc": feasibility.auroc, "feasibility_auroc_uniform": uniform.auroc})
+    return values, feasibility, rank
+
+
+def buffer_states(agent: Any, count: int, rng: np.random.Generator) -> np.ndarray | None:
+    """Up to ``count`` states of the agent's real-transition buffer, read by index (its own generator is untouched).
+
+    :param agent: an agent, with or without a ``pos_buffer``.
+    :param count: the most states returned.
+    :param rng: draws which.
+    :return: [M, D] states, or None when the agent has no buffer or it is empty.
+    """
+    buffer = getattr(agent, "pos_buffer", None)
+    if buffer is None or len(buffer) == 0:
+        return None
+    indices = rng.choice(len(buffer), size=min(len(buffer), count), replace=False)  # [M]
+    return np.asarray(buffer.get(indices).states)
 
 
 def can_label_feasibility(env: gym.Env) -> bool:

@@ -17,13 +17,16 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import TensorBoardOutputFormat, configure
 
 import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
+from ebm_agent.datasets import collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
+from ebm_agent.probe import model_quality
 from eval.evaluation import EpisodeScores, EvaluationLine, append_evaluation, evaluate_episodes, last_evaluation
 from eval.jobs import EVAL_SEED_OFFSET, RESUME_FOLDER, RUN_OUTPUTS, Job, JobResult, library_versions, to_plain
 from eval.pretraining import pretrain
@@ -199,6 +202,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
+        quality = model_quality_of(model, job)
         wall_time = time.perf_counter() - start + earlier
         metrics = {
             "env_id": job.env_id,
@@ -218,6 +222,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "final_evaluation": "EvalCallback at the final step" if reused else "evaluate_policy after learning",
             "eval_env_kwargs": to_plain(eval_kwargs),
             "extra_evaluations": extra,
+            "model_quality": quality,
             "pretraining": pretraining,
             "wall_time_s": wall_time,
             "learn_time_s": learn_time,
@@ -249,6 +254,36 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         training_env = model.get_env()
         if training_env is not None:
             training_env.close()
+
+
+PROBE_MOVES = 2000
+"""(state, move) samples of each feasibility AUROC a finished run records (``ebm_agent.probe``)."""
+
+PROBE_TRANSITIONS = 1000
+"""Held-out random transitions of the next-state rank a finished run records."""
+
+
+def model_quality_of(model: Any, job: Job) -> dict[str, float] | None:
+    """The model-quality probe of a trained agent with an energy (``ebm_agent.probe.model_quality``), for its record.
+
+    Measured on the training env's task (its ``env_kwargs``: e.g. the random-start maze a pretrained model learned),
+    on held-out random transitions and moves seeded ``job.seed + EVAL_SEED_OFFSET``, after the model is saved: the run's
+    scores do not depend on it.
+
+    :param model: the trained agent.
+    :param job: its job.
+    :return: the probe's values by key, or None for an agent without an ``energy_model`` (PPO, Action FF).
+    """
+    if not callable(getattr(model, "energy_model", None)):
+        return None
+    seed = job.seed + EVAL_SEED_OFFSET
+    env = gym.make(job.env_id, **job.env_kwargs)
+    try:
+        held_out = collect_random_transitions(env, PROBE_TRANSITIONS, seed=seed)
+        quality, _, _ = model_quality(model, env, held_out, PROBE_MOVES, seed=seed)
+    finally:
+        env.close()
+    return quality
 
 
 def evaluation_env_kwargs(job: Job) -> dict[str, Any]:
@@ -356,4 +391,13 @@ def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, 
         logger.close()
 
 
-__all__ = ["RUN_LOCK", "agent_settings", "evaluation_env_kwargs", "run_in_progress", "run_job"]
+__all__ = [
+    "PROBE_MOVES",
+    "PROBE_TRANSITIONS",
+    "RUN_LOCK",
+    "agent_settings",
+    "evaluation_env_kwargs",
+    "model_quality_of",
+    "run_in_progress",
+    "run_job",
+]

@@ -119,6 +119,34 @@ def collect_cell(cell: Cell) -> CellResult:
     return result
 
 
+QUALITY_COLUMNS = {
+    "feasibility_auroc": "wall AUROC near the visited states",
+    "feasibility_auroc_uniform": "wall AUROC, uniform states",
+    "next_state_rank": "next-state top-1 of 65",
+    "next_state_mean_rank": "next-state mean rank (0 best, 0.5 chance)",
+}
+"""The model-quality keys a finished EBM run records (``eval.run.model_quality_of``), and their column titles."""
+
+
+def quality_table(results: Sequence[CellResult]) -> str | None:
+    """The model-quality probe of the cells whose runs recorded it: mean ± std over seeds of each measure.
+
+    :param results: the cells' results.
+    :return: the markdown table, or None when no run recorded the probe.
+    """
+    rows = []
+    for result in results:
+        records = [m["model_quality"] for _, m in result.runs if m.get("model_quality")]
+        if records:
+            cells = []
+            for key in QUALITY_COLUMNS:
+                values = np.array([r[key] for r in records if r.get(key) is not None], dtype=np.float64)
+                cells.append(f"{values.mean():.3f} ± {values.std():.3f}" if len(values) else "-")
+            rows.append([result.cell.setting, result.cell.env, result.cell.label, str(len(records)), *cells])
+    header = ["setting", "env", "agent", "seeds", *QUALITY_COLUMNS.values()]
+    return markdown_table(header, rows) if rows else None
+
+
 def _pm(values: np.ndarray) -> str:
     return f"{stats.mean(values):.2f} ± {stats.std(values):.2f}"
 
@@ -421,6 +449,14 @@ def render_results(
                     figure_metrics[part.name] = json.loads((part.figure_dir / "figure.json").read_text()).get("metrics")
         if all_results:
             section += [cells_table(all_results), ""]
+            quality = quality_table(all_results)
+            if quality is not None:
+                section += [
+                    "The learned energy, probed at the end of each run (`ebm_agent.probe.model_quality`):",
+                    "",
+                    quality,
+                    "",
+                ]
             anchors = anchors_rows(all_results, out_dir)
             if anchors:
                 section += ["Anchors of the evaluation envs:", "", _anchors_md(anchors), ""]

@@ -60,6 +60,7 @@ def test_run_job_writes_the_run_folder(tmp_path, capsys):
     assert metrics["score_std"] == pytest.approx(np.std(last_evaluation))
     assert metrics["success_rate"] == 0.0  # random actions do not stop within 0.01 of the goal
     assert result.timesteps == 200 and result.score_mean == pytest.approx(metrics["score_mean"])
+    assert metrics["model_quality"] is None  # no energy to probe
 
     events = list((tmp_path / "tb" / "particle").glob("random_s3_1/events.out.tfevents.*"))
     assert len(events) == 1 and events[0].stat().st_size > 0
@@ -153,9 +154,26 @@ def test_an_untrained_job_evaluates_the_agent_as_built(tmp_path):
     assert result.timesteps == 0 and len(result.episode_scores) == 2
     metrics = json.loads((job.run_dir / "metrics.json").read_text())
     assert metrics["mode"] == "untrained" and metrics["budget_respected"] and metrics["pretraining"] is None
+    # The energy's model-quality probe is recorded (the particle labels moves past its border infeasible).
+    quality = metrics["model_quality"]
+    assert set(quality) == {"next_state_rank", "next_state_mean_rank", "feasibility_auroc", "feasibility_auroc_uniform"}
+    assert all(0.0 <= value <= 1.0 for value in quality.values())
     saved = EBMPlannerAgent.load(job.run_dir / "model.zip", device="cpu")
     fresh = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), seed=job.seed, device="cpu", **tiny)
     for name, tensor in fresh.policy.state_dict().items():
         assert torch.equal(saved.policy.state_dict()[name], tensor), name
     with pytest.raises(ValueError, match="timesteps must be 0"):
         _job(tmp_path, agent="ebm", mode="untrained", timesteps=10)
+
+
+def test_a_maze_run_records_the_wall_auroc_of_its_energy(tmp_path):
+    """On the maze the env labels moves into walls, so the record also holds the feasibility AUROCs."""
+    tiny = {"planner_config": {"num_samples": 8, "iterations": 2}}
+    settings = {"env_id": "ebm/Maze-v0", "env_kwargs": {"max_episode_steps": 5}, "eval_episodes": 1}
+    job = _job(tmp_path, agent="ebm", mode="untrained", timesteps=0, eval_freq=1, hyperparams=tiny, **settings)
+    result = run_job(job)
+    assert result.ok, result.error
+    quality = json.loads((job.run_dir / "metrics.json").read_text())["model_quality"]
+    assert set(quality) == {"next_state_rank", "next_state_mean_rank", "feasibility_auroc", "feasibility_auroc_uniform"}
+    assert quality["feasibility_auroc"] == quality["feasibility_auroc_uniform"]  # no buffer yet: both uniform
+    assert 0.0 < quality["feasibility_auroc"] < 1.0

@@ -405,3 +405,19 @@ def test_a_comparison_that_does_not_hold_carries_its_reason_and_one_that_holds_n
     assert f"  - reacher: {HOLDS} (" in holding and "Why:" not in holding  # a verdict is never written down
     particle = evaluate_claims(lookup(-45.0), lambda part: None)[0].comparisons[0]
     assert particle.label == "particle" and particle.why is None
+
+
+def test_the_model_quality_table_shows_the_probe_of_the_runs_that_recorded_it(tmp_path):
+    from eval.paper.results_doc import quality_table
+
+    part = parts_of(tmp_path, "table1")["table1/maze/pretrained"]
+    assert quality_table([collect_cell(cell(part, "ebm"))]) is None  # nothing run yet
+    for job, auroc in zip(cell(part, "ebm").jobs, (0.8, 0.9, 1.0)):
+        fake_run(job, -70.0)
+        metrics = json.loads((job.run_dir / "metrics.json").read_text())
+        metrics["model_quality"] = {"feasibility_auroc": auroc, "next_state_rank": 0.5, "next_state_mean_rank": 0.25}
+        (job.run_dir / "metrics.json").write_text(json.dumps(metrics))
+    table = quality_table([collect_cell(cell(part, "ebm")), collect_cell(cell(part, "action-ff"))])
+    assert table is not None and len(table.splitlines()) == 3  # header, rule, the EBM's row only
+    row = table.splitlines()[-1]
+    assert "| 3 | 0.900 ± 0.082 | - | 0.500 ± 0.000 | 0.250 ± 0.000 |" in row  # no uniform AUROC recorded: "-"
