@@ -8,8 +8,9 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.logger import Figure
-from stable_baselines3.common.type_aliases import GymEnv
+from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBuffer
@@ -32,7 +33,7 @@ from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss, reach_c
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
-from ebm_agent.subgoals import GraphSubgoals
+from ebm_agent.subgoals import FrontierSubgoals, GraphSubgoals
 
 SelfEBMPlannerAgent = TypeVar("SelfEBMPlannerAgent", bound="EBMPlannerAgent")
 
@@ -43,8 +44,12 @@ GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
 }
 """Goal energies by name; pass an instance to ``cost=`` for anything else."""
 
-SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed"})
+SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience"})
 """The keywords of ``subgoal_graph`` (:meth:`ebm_agent.subgoals.GraphSubgoals.from_transitions`)."""
+
+EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "revisit_cost": 1.0}
+"""The keywords of ``explore`` and their defaults: transitions between rebuilds of the graph, and the weights of
+:class:`~ebm_agent.subgoals.FrontierSubgoals`."""
 
 LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach")
 """Energy objectives by name (``loss=``)."""
@@ -124,6 +129,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         of ``learn`` (its replay buffer's), and then aims each plan at a subgoal along the graph's shortest path to
         the goal (``self.subgoals``). None (the default, the paper's): plans aim at the goal. The graph is not saved
         with the agent: after ``load``, call :meth:`build_subgoals`.
+    :param explore: frontier exploration during ``learn`` (issue #36): a dict of ``every`` (transitions between
+        rebuilds of the graph over the replay buffer, 1000), ``goal_heuristic`` (1.0; 0 explores without regard to
+        the goal) and ``revisit_cost`` (1.0) of :class:`~ebm_agent.subgoals.FrontierSubgoals`: the plans aim along the
+        graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
+        ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
+        graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
     :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
         states only); 0 disables them.
     :param stats_window_size: episodes averaged for ``rollout/*``.
@@ -153,6 +164,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         inverse_dynamics: str | InverseDynamics = "ground_truth",
         image_log_interval: int = 1000,
         subgoal_graph: dict[str, Any] | None = None,
+        explore: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -192,6 +204,14 @@ class EBMPlannerAgent(PlannerAgentBase):
                     f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
                 )
         self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
+        if explore is not None:
+            unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
+            if not isinstance(explore, dict) or unknown:
+                raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
+            every = explore.get("every", EXPLORE_DEFAULTS["every"])
+            if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+                raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
+        self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
         self.extra_energies: list[ExtraEnergy] = []
         super().__init__(
             policy,
@@ -480,13 +500,51 @@ class EBMPlannerAgent(PlannerAgentBase):
             self.build_subgoals(dataset.states, dataset.next_states)
         return self
 
-    def learn(self: SelfEBMPlannerAgent, *args: Any, **kwargs: Any) -> SelfEBMPlannerAgent:
-        """:meth:`PlannerAgentBase.learn`, then (with ``subgoal_graph``) the subgoal graph over the replay buffer."""
-        super().learn(*args, **kwargs)
+    def learn(
+        self: SelfEBMPlannerAgent,
+        total_timesteps: int,
+        callback: MaybeCallback = None,
+        log_interval: int = 10,
+        tb_log_name: str | None = None,
+        reset_num_timesteps: bool = True,
+        progress_bar: bool = False,
+    ) -> SelfEBMPlannerAgent:
+        """:meth:`PlannerAgentBase.learn` (with ``explore``, exploring the frontier of a graph over the replay buffer,
+        rebuilt every ``explore["every"]`` transitions), then (with ``subgoal_graph``) the subgoal graph over it."""
+        if self.explore is not None:
+            rebuild = _FrontierRebuild(int(self.explore["every"]))
+            others = [] if callback is None else list(callback) if isinstance(callback, list) else [callback]
+            callback = CallbackList([rebuild, *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in others)])
+        try:
+            super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
+        finally:
+            self.explorer = None  # exploring ends with learn
         if self.subgoal_graph is not None and len(self.pos_buffer) > 0:
             real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
             self.build_subgoals(real.states, real.next_states)
         return self
+
+    def build_frontier(self) -> FrontierSubgoals | None:
+        """Rebuild the graph over the replay buffer and explore its frontier (``explore``'s settings) in the plans made
+        while learning; the counts of plans per cell carry over from the previous frontier. With ``subgoal_graph``,
+        the same graph also aims the plans of ``predict`` (the evaluations made during ``learn``).
+
+        :return: the frontier, also ``self.explorer``; None while the buffer is empty.
+        """
+        if len(self.pos_buffer) == 0:
+            return None
+        settings = self.explore or EXPLORE_DEFAULTS
+        real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **(self.subgoal_graph or {}))
+        counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
+        self.explorer = FrontierSubgoals(
+            graph, float(settings["goal_heuristic"]), float(settings["revisit_cost"]), plan_counts=counts
+        )
+        if self.subgoal_graph is not None:
+            self.subgoals = graph
+        self.logger.record("explore/frontiers", self.explorer.num_frontiers)
+        self.logger.record("explore/graph_nodes", len(graph.nodes))
+        return self.explorer
 
     def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> GraphSubgoals:
         """Build the subgoal graph (``subgoal_graph``'s settings, or the defaults) over real transitions and use it.
@@ -542,3 +600,18 @@ class EBMPlannerAgent(PlannerAgentBase):
 
         figure = plan_figure(self.energy_model, spec.state_low, spec.state_high, segment.planned, segment.real_next_states)
         self.logger.record("plan/energy_map", Figure(figure, close=True), exclude=("stdout", "log", "json", "csv"))
+
+
+class _FrontierRebuild(BaseCallback):
+    """Rebuild the exploring agent's frontier (:meth:`EBMPlannerAgent.build_frontier`) every ``every`` transitions."""
+
+    def __init__(self, every: int) -> None:
+        super().__init__()
+        self.every = every
+        self._next = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            if self.model.build_frontier() is not None:  # type: ignore[attr-defined]
+                self._next = self.num_timesteps + self.every
+        return True

@@ -180,6 +180,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self._n_updates = 0
         self._online_loop: OnlineLoopState | None = None
         self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
+        self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
         if _init_setup_model:
             self._setup_model()
 
@@ -268,6 +269,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             "planner",
             "_generator",
             "subgoals",
+            "explorer",
         ]
 
     # --------------------------------------------------------- model hooks
@@ -620,7 +622,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             start = time.perf_counter()
             new_plans, new_actions, cost = self._plan(
                 states[group],
-                self._plan_goals(states[group], goals[group]),
+                self._plan_goals(states[group], goals[group], training=True),
                 init,
                 self._generator,
                 training=True,
@@ -630,15 +632,18 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             loop.plans[group], loop.plan_cost[group] = new_plans, cost
             loop.planned_actions[group] = np.nan if new_actions is None else new_actions
 
-    def _plan_goals(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+    def _plan_goals(self, states: np.ndarray, goals: np.ndarray, training: bool = False) -> np.ndarray:
         """The goals the plans aim at: ``subgoals.subgoals(states, goals)`` where a subgoal provider is set (long-horizon
-        goal reaching, :mod:`ebm_agent.subgoals`), else the goals themselves.
+        goal reaching, :mod:`ebm_agent.subgoals`), else the goals themselves; while learning, the ``explorer``'s where
+        one is set (exploration, e.g. :class:`~ebm_agent.subgoals.FrontierSubgoals`).
 
         :param states: [n, D] current states.
         :param goals: [n, G] their goals.
+        :param training: True for the plans made inside ``learn`` (not those of ``predict``, evaluations included).
         :return: [n, G].
         """
-        return goals if self.subgoals is None else self.subgoals.subgoals(states, goals)
+        provider = self.explorer if (training and self.explorer is not None) else self.subgoals
+        return goals if provider is None else provider.subgoals(states, goals)
 
     def _warm_plans_apart(self) -> bool:
         """Whether warm-started and fresh plans get different planning budgets (then they are planned apart).

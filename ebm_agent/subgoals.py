@@ -34,7 +34,7 @@ from scipy.spatial import cKDTree
 
 from ebm_agent.probe import transition_energies
 
-__all__ = ["GraphSubgoals"]
+__all__ = ["FrontierSubgoals", "GraphSubgoals"]
 
 
 @dataclass
@@ -54,6 +54,10 @@ class GraphSubgoals:
         cells and the energy allows each move of at most one cell along it (under ``energy_threshold``), so that plans
         do not cut corners through walls; without it, the node ``lookahead`` edges along.
     :param cell: the grid's cell side, in units of ``step``.
+    :param patience: with a number, a row of :meth:`subgoals` whose state has not moved a quarter of a real step since
+        the previous call that many times in a row (a plan that keeps running into something the graph's segment
+        test let through, such as a wall's corner) aims at the next node of its path instead of the farthest in
+        sight; None (the default): never.
     """
 
     nodes: np.ndarray
@@ -64,9 +68,11 @@ class GraphSubgoals:
     energy_threshold: float
     energy: Any = None
     cell: float = 0.75
+    patience: int | None = None
     _tree: cKDTree = field(init=False, repr=False)
     _cells: set[tuple[int, ...]] = field(init=False, repr=False)
     _paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False)
+    _last: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict, init=False, repr=False)  # row -> (state, stalls)
 
     def __post_init__(self) -> None:
         self._tree = cKDTree(self.nodes / self.step)  # Chebyshev queries in units of one step
@@ -84,6 +90,7 @@ class GraphSubgoals:
         clearance: float = 2.0,
         max_nodes: int = 5000,
         seed: int = 0,
+        patience: int | None = None,
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -99,6 +106,8 @@ class GraphSubgoals:
             largest), which keeps paths and subgoals off walls; 0: every move costs the same.
         :param max_nodes: cap on the nodes (a random subset of the occupied cells beyond it).
         :param seed: seed of that subset and of the transitions the threshold is read from.
+        :param patience: calls without moving after which a subgoal is the path's next node (see the class); None:
+            never.
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, or a quantile outside (0, 1].
         """
@@ -131,7 +140,9 @@ class GraphSubgoals:
         graph = csr_matrix((cost, (allowed[:, 0], allowed[:, 1])), shape=(len(nodes), len(nodes)))
         spec = agent.goal_spec
         horizon = int(agent.horizon) if lookahead is None else int(lookahead)
-        return cls(nodes, np.asarray(spec.goal_indices), step, graph, max(horizon, 1), threshold, energy, cell)
+        if patience is not None and (isinstance(patience, bool) or not isinstance(patience, int) or patience < 1):
+            raise ValueError(f"patience must be None or a positive int, got {patience!r}.")
+        return cls(nodes, np.asarray(spec.goal_indices), step, graph, max(horizon, 1), threshold, energy, cell, patience)
 
     @property
     def num_edges(self) -> int:
@@ -156,9 +167,20 @@ class GraphSubgoals:
             while len(path) <= self.lookahead and path[-1] != target:
                 path.append(int(toward[path[-1]]))
             chosen = self._in_sight(state, path) if self.energy is not None else path[-1]
+            if self._stalled(i, state) and len(path) > 1:
+                chosen = path[1]  # stuck: the next node, one move away, instead of the farthest in sight
             if chosen != target:
                 out[i] = self.nodes[chosen, self.goal_indices]
         return out
+
+    def _stalled(self, row: int, state: np.ndarray) -> bool:
+        """Whether row ``row``'s state stayed put (within a quarter step) for ``patience`` calls in a row."""
+        if self.patience is None:
+            return False
+        last = self._last.get(row)
+        stalls = last[1] + 1 if last is not None and np.all(np.abs(state - last[0]) < 0.25 * self.step) else 0
+        self._last[row] = (state.copy(), stalls)
+        return stalls >= self.patience
 
     def _in_sight(self, state: np.ndarray, path: list[int]) -> int:
         """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` the energy allows."""
@@ -213,3 +235,136 @@ class GraphSubgoals:
             if np.isfinite(distance[int(node)]):
                 return int(node)
         return None
+
+
+@dataclass
+class FrontierSubgoals:
+    """Exploration while learning online: towards the goal along the graph where the goal was seen, else towards the
+    frontier of what was visited, chosen optimistically and away from frontiers already tried.
+
+    A frontier is a visited cell of the graph (:class:`GraphSubgoals`) with an unvisited neighbour cell along one
+    state dim. From the current node, each frontier F with unvisited neighbour U costs
+
+        path cost to F (the graph's edges)  +  ``goal_heuristic`` x (distance from U to the goal, in real moves)
+                                            +  ``revisit_cost`` x (plans already made in F's cell)
+
+    and the cheapest is chosen: with the heuristic, the frontier whose unexplored side looks closest to the goal, as
+    A* expands nodes (greedily: the Euclidean distance in moves can overestimate the diagonal moves left), so that a
+    detour is tried once the direct way is found closed; with ``goal_heuristic=0``, the nearest frontier (goal-free
+    coverage). Each plan made in a cell counts against it, and so does each plan that pushes past a frontier
+    (wherever the agent is: it may be beyond F, in cells the graph does not hold yet), so that a frontier whose
+    unvisited side is a wall, or out of the env's bounds, is given up after a few plans that do not get through. The
+    subgoal is the farthest node in sight along the graph's path to F, and once F is within the plan's lookahead and
+    in sight, a point past F towards U, as many real moves away as the plan has left. Where a node lies within one
+    cell of the goal, the plans aim along the graph's shortest path to the goal (:meth:`GraphSubgoals.subgoals`)
+    instead (unless ``goal_heuristic`` is 0: goal-free exploration never turns to the goal).
+
+    It uses only the visited states, the energy (through the graph's edges) and the goal; never the env's layout.
+
+    :param graph: the graph over the visited states.
+    :param goal_heuristic: weight of the distance, in real moves, from a frontier's unvisited side to the goal (0:
+        goal-free exploration).
+    :param revisit_cost: cost of a frontier per plan already made in its cell.
+    :param plan_counts: plans made per cell (cell index tuple -> count), kept across rebuilds of the graph.
+    :param depth: a frontier's side counts as unvisited when this many cells that way are (1: any unvisited
+        neighbour; more leaves out the small holes inside what was visited, which are not worth a trip).
+    """
+
+    graph: GraphSubgoals
+    goal_heuristic: float = 1.0
+    revisit_cost: float = 1.0
+    plan_counts: dict[tuple[int, ...], int] = field(default_factory=dict)
+    depth: int = 3
+    _frontier_nodes: np.ndarray = field(init=False, repr=False)  # [F] node index of each frontier
+    _frontier_points: np.ndarray = field(init=False, repr=False)  # [F, D] centre of its unvisited neighbour cell
+    _frontier_push: np.ndarray = field(init=False, repr=False)  # [F, D] one real move from the node towards it
+    _frontier_cells: list[tuple[int, ...]] = field(init=False, repr=False)  # [F] the node's cell
+
+    def __post_init__(self) -> None:
+        graph = self.graph
+        node_cells = graph._cell_of(graph.nodes)  # [V, D]
+        side = graph.cell * graph.step  # [D]
+        nodes, points, pushes, cells = [], [], [], []
+        for index, cell in enumerate(node_cells):
+            for dim in range(len(cell)):
+                for sign in (-1, 1):
+                    beyond = cell[None].repeat(self.depth, axis=0)  # [depth, D] the next cells that way
+                    beyond[:, dim] += sign * np.arange(1, self.depth + 1)
+                    if not any(tuple(other) in graph._cells for other in beyond.tolist()):
+                        neighbour = beyond[0]
+                        nodes.append(index)
+                        points.append((neighbour + 0.5) * side)
+                        push = np.zeros(len(cell))
+                        push[dim] = sign * graph.step[dim]
+                        pushes.append(push)
+                        cells.append(tuple(cell.tolist()))
+        dim = graph.nodes.shape[1]
+        self._frontier_nodes = np.asarray(nodes, dtype=np.int64)
+        self._frontier_points = np.asarray(points, dtype=np.float32).reshape(-1, dim)
+        self._frontier_push = np.asarray(pushes, dtype=np.float32).reshape(-1, dim)
+        self._frontier_cells = cells
+
+    @property
+    def num_frontiers(self) -> int:
+        """(visited cell, unvisited neighbour) pairs of the graph."""
+        return len(self._frontier_nodes)
+
+    def subgoals(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """The goal each plan should aim at while exploring; counts a plan in each state's cell.
+
+        :param states: [N, D] current states.
+        :param goals: [N, G] the goals.
+        :return: [N, G] subgoals (the goals themselves where the graph has no node near the state).
+        """
+        graph = self.graph
+        out = np.array(goals, dtype=np.float32, copy=True)  # [N, G]
+        known = graph.subgoals(states, goals)  # [N, G] along the graph to the goal, where a path exists
+        for i, (state, goal) in enumerate(zip(np.asarray(states, np.float32), out)):
+            cell = tuple(graph._cell_of(state[None])[0].tolist())
+            self.plan_counts[cell] = self.plan_counts.get(cell, 0) + 1
+            if self.goal_heuristic > 0 and self._goal_seen(goal):
+                distance, _ = graph._paths_to(graph._goal_node(goal))
+                if graph._start_node(state, distance) is not None:  # a known way to the goal: take it
+                    out[i] = known[i]
+                    continue
+            chosen = self._frontier_subgoal(state, goal)
+            if chosen is not None:
+                out[i] = chosen
+        return out
+
+    def _goal_seen(self, goal: np.ndarray) -> bool:
+        """Whether a node lies within one cell of the goal (in the goal dims)."""
+        graph = self.graph
+        dims = graph.goal_indices
+        gaps = np.abs(graph.nodes[:, dims] - goal) / (graph.cell * graph.step[dims])  # [V, G] in cells
+        return bool((gaps.max(axis=1) <= 1.0).any())
+
+    def _frontier_subgoal(self, state: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
+        """The subgoal towards the cheapest frontier from ``state`` ([G]), or None without a reachable one."""
+        graph = self.graph
+        if self.num_frontiers == 0:
+            return None
+        _, near = graph._tree.query(state / graph.step, k=1, p=np.inf)
+        start = int(near)
+        distance, predecessors = dijkstra(graph.graph, indices=start, return_predecessors=True)  # [V] each
+        dims = graph.goal_indices
+        moves_left = np.linalg.norm((self._frontier_points[:, dims] - goal) / graph.step[dims], axis=1)  # [F]
+        tried = np.array([self.plan_counts.get(cell, 0) for cell in self._frontier_cells], dtype=np.float64)  # [F]
+        cost = distance[self._frontier_nodes] + self.goal_heuristic * moves_left + self.revisit_cost * tried
+        best = int(np.argmin(cost))
+        if not np.isfinite(cost[best]):
+            return None
+        target = int(self._frontier_nodes[best])
+        path = [target]
+        while path[-1] != start:
+            path.append(int(predecessors[path[-1]]))
+        path = path[::-1][: graph.lookahead + 1]  # [start, ..., at most lookahead edges along]
+        chosen = graph._in_sight(state, path) if graph.energy is not None and len(path) > 1 else path[-1]
+        if chosen != target:
+            return graph.nodes[chosen, dims]
+        # The frontier is in sight: push past it into the unvisited cell for the rest of the plan's moves, so that
+        # a plan explores a whole horizon's worth (a wall there stops the agent, and the plans made count against F).
+        moves = max(graph.lookahead - (len(path) - 1), 1)
+        cell = self._frontier_cells[best]  # the push counts against F wherever the agent is (it may be past F)
+        self.plan_counts[cell] = self.plan_counts.get(cell, 0) + 1
+        return (graph.nodes[target] + moves * self._frontier_push[best])[dims]

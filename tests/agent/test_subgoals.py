@@ -8,10 +8,11 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from stable_baselines3.common.callbacks import BaseCallback
 
 import envs  # noqa: F401  (registers the ids)
 from ebm_agent import EBMPlannerAgent
-from ebm_agent.subgoals import GraphSubgoals
+from ebm_agent.subgoals import FrontierSubgoals, GraphSubgoals
 
 
 class WallEnergy(torch.nn.Module):
@@ -145,3 +146,96 @@ def test_a_subgoal_is_never_across_cells_nobody_visited():
     subgoal = graph.subgoals(start, goal)[0]
     segment = start[0] + np.linspace(0, 1, 200)[:, None] * (subgoal - start[0])
     assert not np.any((np.abs(segment[:, 0]) < 0.28) & (np.abs(segment[:, 1]) < 0.28))
+
+
+def _left_graph(**kwargs) -> GraphSubgoals:
+    """The graph of a walk that never left x < -0.2: everything right of it is unvisited."""
+    agent = SimpleNamespace(
+        energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
+    )
+    states, following = _walk()
+    keep = (states[:, 0] < -0.2) & (following[:, 0] < -0.2)
+    return GraphSubgoals.from_transitions(agent, states[keep], following[keep], **kwargs)
+
+
+def test_the_frontier_chosen_is_the_visited_edge_nearest_the_unseen_goal():
+    frontier = FrontierSubgoals(_left_graph())
+    assert frontier.num_frontiers > 0
+    start, goal = np.array([[-0.8, -0.8]], np.float32), np.array([[0.8, -0.8]], np.float32)
+    subgoal = frontier.subgoals(start, goal)[0]
+    assert subgoal[0] > -0.8 + 0.1  # towards the visited region's right edge, the side of the goal
+    near_edge = np.array([[-0.25, -0.8]], np.float32)
+    pushed = frontier.subgoals(near_edge, goal)[0]
+    assert pushed[0] > -0.2  # at the frontier: past the visited edge, into the unvisited side
+
+
+def test_plans_that_do_not_get_through_make_the_frontier_give_way():
+    graph = _left_graph()
+    frontier = FrontierSubgoals(graph, revisit_cost=1.0)
+    edge = graph.nodes[np.argmin(np.abs(graph.nodes - [-0.2, -0.8]).max(axis=1))]  # a visited node at the right edge
+    state, goal = edge[None].astype(np.float32), np.array([[0.8, -0.8]], np.float32)
+    first = frontier.subgoals(state, goal)[0]
+    for _ in range(200):  # stuck: every plan is made in the same cell
+        frontier.subgoals(state, goal)
+    later = frontier.subgoals(state, goal)[0]
+    assert first[0] > edge[0] and np.abs(later - first).max() > 0.01  # pushed right first; another frontier now
+    assert max(frontier.plan_counts.values()) >= 202  # every plan made in the stuck cell counts against it
+
+
+def test_goal_free_exploration_heads_for_the_nearest_frontier():
+    frontier = FrontierSubgoals(_left_graph(), goal_heuristic=0.0)
+    state = np.array([[-0.95, 0.0]], np.float32)  # beside the left border of [-1, 1]^2: its frontier is next door
+    subgoal = frontier.subgoals(state, np.array([[0.8, -0.8]], np.float32))[0]
+    assert subgoal[0] < -0.95 and abs(subgoal[1]) < 0.1
+
+
+def test_once_the_goal_was_seen_the_plans_follow_the_graph_to_it():
+    graph = _graph(lookahead=5)
+    frontier = FrontierSubgoals(graph)
+    start, goal = np.array([[-0.8, -0.8]], np.float32), np.array([[0.8, -0.8]], np.float32)
+    np.testing.assert_array_equal(frontier.subgoals(start, goal), graph.subgoals(start, goal))
+
+
+def test_the_explore_option_explores_during_learn_only():
+    seen = []
+
+    class Record(BaseCallback):
+        def _on_step(self) -> bool:
+            seen.append(type(self.model.explorer).__name__)
+            return True
+
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy",
+        gym.make("ebm/Particle-v0"),
+        seed=0,
+        planner_config={"num_samples": 8, "iterations": 2},
+        explore={"every": 40},
+        image_log_interval=0,
+    )
+    agent.learn(120, callback=Record())
+    assert seen[0] == "NoneType" and seen[-1] == "FrontierSubgoals"  # built once the buffer holds transitions
+    assert agent.explorer is None and agent.subgoals is None  # no subgoal_graph: after learn, plans aim at the goal
+    with pytest.raises(ValueError, match="explore must be None or a dict"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"rebuild": 5})
+    with pytest.raises(ValueError, match="positive int"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"every": 0})
+
+
+def test_while_exploring_the_evaluations_follow_the_graph_and_the_training_plans_the_frontier():
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy",
+        gym.make("ebm/Maze-v0"),
+        seed=0,
+        planner_config={"num_samples": 8, "iterations": 2},
+        explore={"every": 50},
+        subgoal_graph={},
+        image_log_interval=0,
+    )
+    agent.learn(100)
+    agent.build_frontier()
+    assert isinstance(agent.explorer, FrontierSubgoals) and agent.subgoals is agent.explorer.graph
+    state, goal = np.array([[-0.85, -0.85]], np.float32), np.array([[0.7, -0.8]], np.float32)
+    np.testing.assert_array_equal(agent._plan_goals(state, goal), agent.subgoals.subgoals(state, goal))
+    counts = dict(agent.explorer.plan_counts)
+    agent._plan_goals(state, goal, training=True)
+    assert sum(agent.explorer.plan_counts.values()) > sum(counts.values())  # the frontier aimed this plan

@@ -212,7 +212,7 @@ def test_claims_follow_the_numbers_they_are_given():
     def lookup(ebm_score: float, ff_score: float, ppo_score: float | None, untrained_score: float | None = -1000.0):
         def scores(key):
             _part, agent, setting = key
-            value = {"ebm": ebm_score, "action-ff": ff_score, "ppo": ppo_score}[agent]
+            value = {"ebm": ebm_score, "action-ff": ff_score, "ppo": ppo_score, "sac-her": ppo_score}[agent]
             value = untrained_score if setting.startswith("untrained") else value
             return [] if value is None else [value, value - 1, value + 1]
 
