@@ -20,6 +20,7 @@ EXPECTED_METRICS = {
     "plan_diversity": {"horizons", "goal_energy", "plans_per_horizon", "seeds"},
     "reacher_directions": {"cases", "horizon", "reach_tolerance", "seeds"},
     "maze_exploration": {"agents", "free_cells", "timesteps", "seeds"},
+    "frontier_exploration": {"agents", "free_cells", "timesteps", "seeds"},
     "sawyer_exploration": {"agents", "max_random_occupancy", "normaliser", "seeds"},
     "energy_maps": {"envs", "checkpoints", "timesteps", "seeds"},
 }
@@ -36,7 +37,7 @@ def figures(tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[FigureR
     return runs
 
 
-def test_the_registry_holds_the_six_paper_figures():
+def test_the_registry_holds_the_six_paper_figures_and_the_frontier_coverage():
     assert set(FIGURES) == set(EXPECTED_METRICS)
 
 
@@ -92,9 +93,10 @@ def test_reacher_direction_fractions_are_sane(figures):
         assert case["both_directions"] == (ccw > 0 and cw > 0)
 
 
-def test_maze_coverage_is_a_fraction_that_only_grows(figures):
-    metrics = figures["maze_exploration"][0].metrics
-    assert set(metrics["agents"]) == {"ebm", "random"}
+@pytest.mark.parametrize("name, explorer", [("maze_exploration", "ebm"), ("frontier_exploration", "ebm_frontier")])
+def test_maze_coverage_is_a_fraction_that_only_grows(figures, name, explorer):
+    metrics = figures[name][0].metrics
+    assert set(metrics["agents"]) == {explorer, "random"}
     for record in metrics["agents"].values():
         assert 0.0 < record["coverage"]["mean"] <= 1.0
         assert 0.0 < record["coverage_of_free"]["mean"] <= 1.0

@@ -14,6 +14,7 @@ name                        what it reproduces
 ``reacher_directions``      Reacher plans to one goal go both clockwise and counter-clockwise
 ``maze_exploration``        maze coverage of a goal-free EBM vs random actions, heatmaps and curve
 ``sawyer_exploration``      Sawyer finger voxel occupancy of a goal-free EBM vs random (log-x curve)
+``frontier_exploration``    not in the paper: maze coverage of the EBM exploring its visited states' frontier vs random
 ``energy_maps``             energy and visitation maps at several points of training (particle, maze)
 =========================== ====================================================================================
 
@@ -32,7 +33,7 @@ from collections.abc import Callable
 
 from eval.paper.figures.common import SCALES, FigureBudget, FigureResult, budget_for
 from eval.paper.figures.energy import energy_maps
-from eval.paper.figures.exploration import maze_exploration, original_voxel_occupancy, sawyer_exploration
+from eval.paper.figures.exploration import frontier_exploration, maze_exploration, original_voxel_occupancy, sawyer_exploration
 from eval.paper.figures.obstacle import OBSTACLE_BOX, obstacle_generalisation, obstacle_optimum
 from eval.paper.figures.planning import plan_diversity, reacher_directions
 
@@ -41,6 +42,7 @@ FIGURES: dict[str, Callable[..., FigureResult]] = {
     "plan_diversity": plan_diversity,
     "reacher_directions": reacher_directions,
     "maze_exploration": maze_exploration,
+    "frontier_exploration": frontier_exploration,
     "sawyer_exploration": sawyer_exploration,
     "energy_maps": energy_maps,
 }
@@ -54,6 +56,7 @@ __all__ = [
     "FigureResult",
     "budget_for",
     "energy_maps",
+    "frontier_exploration",
     "maze_exploration",
     "obstacle_generalisation",
     "obstacle_optimum",

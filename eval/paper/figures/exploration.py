@@ -17,7 +17,7 @@ what they visit is recorded during training by :class:`~ebm_agent.exploration.Vi
 from __future__ import annotations
 
 import functools
-from collections.abc import Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,9 +27,12 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from baselines.random_agent import RandomAgent
+from ebm_agent import EBMPlannerAgent
 from ebm_agent.exploration import VisitedStatesCallback, grid_counts, grid_coverage, linear_checkpoints, log_checkpoints
+from ebm_agent.presets import FAST_EBM, merge_settings
 from envs.maze import maze_valid
 from eval.paper.figures.common import (
+    FigureBudget,
     FigureResult,
     build_ebm,
     figure_digest,
@@ -49,6 +52,12 @@ ORIGINAL_CUT = 4000
 
 NO_GOAL = {"goal_weight": 0.0}
 """The EBM's cost without a goal: exploration follows the energy alone."""
+
+FRONTIER_EXPLORE = {"every": 250, "goal_heuristic": 0.0}
+"""``EBMPlannerAgent(explore=...)`` of the frontier explorer: the graph rebuilt every 250 transitions, no goal."""
+
+FRONTIER_GOAL_WEIGHT = {"goal_weight": 10.0}
+"""The frontier explorer's cost: its plans aim at the frontier subgoals with weight 10."""
 
 VOXEL_CORNERS = np.linspace(-1.0, 1.0, 10)
 """Lower corners of the original's finger voxels on each axis (spacing 2/9 = 0.222)."""
@@ -84,17 +93,60 @@ def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper
     :param scale: ``"paper"`` or ``"smoke"``.
     :return: the result; ``metrics["agents"][a]`` holds final coverage (mean/std/per seed) and the coverage curve.
     """
+    explorers = {
+        "ebm": lambda seed, budget: build_ebm(gym.make("ebm/Maze-v0"), seed, budget, cost=NO_GOAL),
+        "random": _random_explorer,
+    }
+    return _maze_coverage("maze_exploration", explorers, out_dir, seeds, scale)
+
+
+def frontier_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") -> FigureResult:
+    """Coverage of the maze by the EBM exploring the frontier of what it visited without a goal (not in the paper:
+    ``EBMPlannerAgent(explore={"goal_heuristic": 0})``, the fast preset's planning budgets, goal weight 10 on the
+    frontier subgoals) and by uniform random actions over the same transitions.
+
+    :param out_dir: folder of the PNGs and ``figure.json``.
+    :param seeds: one run of each per seed.
+    :param scale: ``"paper"`` or ``"smoke"``.
+    :return: the result, as :func:`maze_exploration`'s.
+    """
+
+    def frontier(seed: int, budget: FigureBudget) -> EBMPlannerAgent:
+        planner = merge_settings(FAST_EBM["planner_config"], budget.planner)  # a smoke budget's tiny planner wins
+        settings = {"cost": FRONTIER_GOAL_WEIGHT, "explore": FRONTIER_EXPLORE, "planner_config": planner}
+        return build_ebm(gym.make("ebm/Maze-v0"), seed, budget, **settings)
+
+    return _maze_coverage(
+        "frontier_exploration", {"ebm_frontier": frontier, "random": _random_explorer}, out_dir, seeds, scale
+    )
+
+
+def _random_explorer(seed: int, budget: FigureBudget) -> RandomAgent:
+    """Uniform random actions on the maze (it has no exploration sampler)."""
+    return RandomAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=seed, record_visited=False)
+
+
+def _maze_coverage(
+    figure: str, explorers: Mapping[str, Callable[[int, FigureBudget], Any]], out_dir: Path, seeds: Sequence[int], scale: str
+) -> FigureResult:
+    """The coverage figure of some maze explorers, each learning for the budget's maze transitions per seed.
+
+    :param figure: the figure's name.
+    :param explorers: agent name -> ``(seed, budget) -> agent`` (an SB3 algorithm with ``learn``).
+    :param out_dir: the figure's folder.
+    :param seeds: one run of each explorer per seed.
+    :param scale: the scale.
+    :return: the result.
+    """
     out_dir, seeds, budget = prepare(out_dir, seeds, scale)
     checkpoints = linear_checkpoints(budget.maze_timesteps, budget.curve_points)
     if ORIGINAL_CUT < budget.maze_timesteps:
         checkpoints = sorted({*checkpoints, ORIGINAL_CUT})
     measure = lambda states: grid_coverage(states, MAZE_BINS)  # noqa: E731
-    runs: dict[str, list[VisitedStatesCallback]] = {"ebm": [], "random": []}
+    runs: dict[str, list[VisitedStatesCallback]] = {agent: [] for agent in explorers}
     for seed in seeds:
-        ebm = build_ebm(gym.make("ebm/Maze-v0"), seed, budget, cost=NO_GOAL)
-        runs["ebm"].append(_record(ebm, budget.maze_timesteps, checkpoints, measure))
-        random_agent = RandomAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=seed, record_visited=False)
-        runs["random"].append(_record(random_agent, budget.maze_timesteps, checkpoints, measure))
+        for agent, make in explorers.items():
+            runs[agent].append(_record(make(seed, budget), budget.maze_timesteps, checkpoints, measure))
     free = free_cells(MAZE_BINS)
     agents: dict[str, Any] = {}
     for name, callbacks in runs.items():
@@ -117,7 +169,7 @@ def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper
     }
     first = {name: callbacks[0].visited_states for name, callbacks in runs.items()}
     pngs = [
-        _plot_maze_heatmaps(first, free, out_dir / "maze_heatmaps.png"),
+        _plot_maze_heatmaps(first, free, out_dir / "maze_heatmaps.png", order=list(reversed(first))),
         _plot_curves(agents, out_dir / "maze_coverage.png", "maze coverage (fraction of 20 x 20 cells)", log_x=False),
     ]
     rows = [
@@ -125,7 +177,7 @@ def maze_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper
         for name in agents
     ]
     table = markdown_table(["agent", "coverage (all cells)", "coverage (cells with free space)"], rows)
-    return finish("maze_exploration", out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
+    return finish(figure, out_dir, seeds, scale, pngs=pngs, metrics=metrics, table_md=table)
 
 
 def sawyer_exploration(out_dir: Path, *, seeds: Sequence[int], scale: str = "paper") -> FigureResult:
@@ -289,26 +341,29 @@ def _plot_curves(agents: dict[str, Any], path: Path, title: str, log_x: bool, sc
     return save_png(figure, path)
 
 
-def _plot_maze_heatmaps(visited: dict[str, np.ndarray], free: np.ndarray, path: Path) -> Path:
-    figure, axes = plt.subplots(1, 3, figsize=(11, 3.8))
+def _plot_maze_heatmaps(visited: dict[str, np.ndarray], free: np.ndarray, path: Path, order: list[str]) -> Path:
+    figure, axes = plt.subplots(1, len(order) + 1, figsize=(3.7 * (len(order) + 1), 3.8))
     extent = (-1.0, 1.0, -1.0, 1.0)
-    for axis, name in zip(axes, ("random", "ebm")):
+    for axis, name in zip(axes, order):
         counts = grid_counts(visited[name], MAZE_BINS)
         image = axis.imshow(np.log1p(counts), origin="lower", extent=extent, cmap="magma")
         figure.colorbar(image, ax=axis, fraction=0.046, label="log(1 + visits)")
         axis.set_title(f"{name}: {grid_coverage(visited[name], MAZE_BINS):.0%} of cells (first seed)")
     coords = np.linspace(-1.0, 1.0, 200)
     layout = maze_valid(np.stack(np.meshgrid(coords, coords), axis=-1))  # [200, 200] row = y
-    axes[2].imshow(layout, origin="lower", extent=extent, cmap="Blues", vmin=0, vmax=1.5)
-    axes[2].set_title("maze: admissible space in blue")
+    axes[-1].imshow(layout, origin="lower", extent=extent, cmap="Blues", vmin=0, vmax=1.5)
+    axes[-1].set_title("maze: admissible space in blue")
     return save_png(figure, path)
 
 
 __all__ = [
+    "FRONTIER_EXPLORE",
+    "FRONTIER_GOAL_WEIGHT",
     "VOXEL_CORNERS",
     "VOXEL_WIDTH",
     "count_cells",
     "free_cells",
+    "frontier_exploration",
     "maze_exploration",
     "original_voxel_occupancy",
     "sawyer_exploration",
