@@ -13,7 +13,7 @@ from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
 from ebm_agent.base import Segment
 from ebm_agent.config import OnlineConfig
-from ebm_agent.losses import hard_negative_margin_loss
+from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss
 
 SMALL = {
     "planner_config": {"num_samples": 16, "iterations": 2},
@@ -140,3 +140,21 @@ def test_margin_step_raises_the_failed_energy_against_the_real_one() -> None:
     control_before, control_after = _gap_after_margin_steps(0.0)
     assert after - before > 0.05
     assert abs(control_after - control_before) < 0.02
+
+
+def test_negatives_mode_at_weight_one_is_cd_over_the_joined_negatives() -> None:
+    agent = _agent({"hard_negatives": True, "hard_negative_loss": "negatives"}, l2_coeff=0.5)
+    rng = np.random.default_rng(0)
+    states = rng.uniform(-0.9, -0.6, (5, 2)).astype(np.float32)  # [5, 2]
+    next_states = rng.uniform(-0.9, -0.6, (5, 2)).astype(np.float32)  # [5, 2]
+    hard = agent._hard_negatives([_segment(states, next_states + 0.04, next_states)])[0]  # every step missed
+    assert hard is not None and len(hard) == 5
+    energy = agent.energy_model
+    energy_pos, energy_neg = (
+        energy(torch.as_tensor(states), torch.as_tensor(next_states)),
+        energy(torch.as_tensor(next_states), torch.as_tensor(states)),
+    )  # [5], [5]
+    loss, stats = agent._cd_with_hard_negatives(energy_pos, energy_neg, hard)
+    joined = torch.cat([energy_neg, energy(torch.as_tensor(hard.states), torch.as_tensor(hard.next_states))])  # [10]
+    expected, _ = contrastive_divergence_loss(energy_pos, joined, l2_coeff=0.5)
+    assert torch.isclose(loss, expected, atol=1e-6) and stats["num_failed"] == 5.0
