@@ -209,6 +209,11 @@ class EBMPlannerAgent(PlannerAgentBase):
             device=device,
             _init_setup_model=False,
         )
+        if self.online.hard_negatives and loss != "cd":
+            raise ValueError(
+                f"online.hard_negatives adds a term to the CD loss; loss={loss!r} would ignore the failed steps. "
+                "Use loss='cd' or leave hard_negatives False."
+            )
         self.plan_iterations = int(getattr(self.planner_config, "iterations", 0) or 0)
         self._energy_gaps: list[float] = []
         if _init_setup_model:

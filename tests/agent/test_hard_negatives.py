@@ -56,6 +56,8 @@ def test_off_by_default_and_refused_by_action_ff() -> None:
     assert _agent().hard_negative_buffer is None
     with pytest.raises(ValueError, match="hard_negatives"):
         ActionFFAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), online={"hard_negatives": True}, device="cpu")
+    with pytest.raises(ValueError, match="loss='cd'"):
+        _agent({"hard_negatives": True}, loss="infonce")
 
 
 def test_margin_term_pushes_the_failed_step_above_the_real_one() -> None:
