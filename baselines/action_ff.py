@@ -253,6 +253,11 @@ class ActionFFAgent(PlannerAgentBase):
             device=device,
             _init_setup_model=False,
         )
+        if self.online.hard_negatives:
+            raise ValueError(
+                "online.hard_negatives is an option of the EBM agent (a labelled negative of its energy); "
+                "Action FF learns a forward model from real transitions only. Leave it False."
+            )
         if _init_setup_model:
             self._setup_model()
 

@@ -13,7 +13,7 @@ from stable_baselines3.common.logger import Figure
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 
 from ebm_agent.base import PlannerAgentBase, Segment
-from ebm_agent.buffers import TransitionBuffer
+from ebm_agent.buffers import TransitionBatch, TransitionBuffer
 from ebm_agent.config import OnlineConfig, check_field_types, learn_budgets, make_config, planner_horizon
 from ebm_agent.costs import (
     AccelerationPrior,
@@ -29,7 +29,7 @@ from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
-from ebm_agent.losses import contrastive_divergence_loss, info_nce_loss, reach_candidates
+from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss, info_nce_loss, reach_candidates
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
@@ -145,6 +145,7 @@ class EBMPlannerAgent(PlannerAgentBase):
     """
 
     default_tb_log_name: ClassVar[str] = "EBM"
+    checkpoint_buffers: ClassVar[tuple[str, ...]] = ("pos_buffer", "neg_buffer", "hard_negative_buffer")
 
     def __init__(
         self,
@@ -194,6 +195,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.l2_coeff = l2_coeff
         self.reach_candidates = reach_candidates
         self._reach_radius: torch.Tensor | None = None  # [D] largest real |s' - s| seen, for loss="infonce_reach"
+        self._hard_reach: np.ndarray | None = None  # [D] the same, for online.hard_negative_reach
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         if subgoal_graph is not None:
@@ -227,6 +229,11 @@ class EBMPlannerAgent(PlannerAgentBase):
             device=device,
             _init_setup_model=False,
         )
+        if self.online.hard_negatives and loss != "cd":
+            raise ValueError(
+                f"online.hard_negatives adds a term to the CD loss; loss={loss!r} would ignore the failed steps. "
+                "Use loss='cd' or leave hard_negatives False."
+            )
         self.plan_iterations = int(getattr(self.planner_config, "iterations", 0) or 0)
         self._energy_gaps: list[float] = []
         if _init_setup_model:
@@ -252,6 +259,13 @@ class EBMPlannerAgent(PlannerAgentBase):
             clip_sigma=self.clip_sigma,
         ).to(self.device)
         self.neg_buffer = TransitionBuffer(self.online.neg_buffer_size, spec.state_dim, None, seed=self._base_seed() + 3)
+        # Failed plan steps (online.hard_negatives): states s_t, next_states s'_plan (the impossible target) and, in
+        # the action slot, s'_real (where the env actually went), so its "action_dim" is D.
+        self.hard_negative_buffer = (
+            TransitionBuffer(self.online.hard_negative_buffer_size, spec.state_dim, spec.state_dim, seed=self._base_seed() + 5)
+            if self.online.hard_negatives
+            else None
+        )
         if isinstance(self.planner_kind, str):
             planner_type = PLANNERS[self.planner_kind][0]
             self.planner = planner_type(
@@ -284,10 +298,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         return [
             *super()._excluded_save_params(),
             "neg_buffer",
+            "hard_negative_buffer",
             "plan_cost",
             "extra_energies",
             "_negative_radius",
             "_reach_radius",
+            "_hard_reach",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -351,7 +367,10 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_states = np.concatenate([s.planned[:-1] for s in segments])  # [M, D]
         neg_next = np.concatenate([s.planned[1:] for s in segments])  # [M, D]
         neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
-        stats = self._gradient_step(positives.states, positives.next_states, neg_states, neg_next)
+        hard, num_failed = self._hard_negatives(segments) if self.online.hard_negatives else (None, 0)
+        stats = self._gradient_step(positives.states, positives.next_states, neg_states, neg_next, hard=hard)
+        if self.online.hard_negatives:
+            stats["failed_steps"] = float(num_failed)
         if self.inverse_model is not None and positives.actions is not None:
             stats.update(
                 {
@@ -382,8 +401,53 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.neg_buffer.add(states, next_states)
         return mixed_states, mixed_next
 
+    def _hard_negatives(self, segments: list[Segment]) -> tuple[TransitionBatch | None, int]:
+        """The failed plan steps of ``segments`` plus up to ``hard_negative_batch`` replayed ones (``online.hard_negatives``).
+
+        Step i of a segment failed when max |planned[i + 1] - real_next_states[i]| over the model dims exceeds
+        ``online.hard_negative_threshold``: the agent aimed from the real state at the planned one and the env went
+        elsewhere. With ``online.hard_negative_reach`` the planned state is first clipped into the reach box of the
+        real moves seen so far (``self._hard_reach``). The fresh failed steps are stored after the replayed ones are
+        drawn (as the planned negatives).
+
+        :param segments: the finished segments.
+        :return: a batch of states s_t [H, D], next_states s'_plan [H, D] and actions s'_real [H, D] (the real next
+            state, stored in the action slot), or None when there is neither a fresh nor a stored failed step; and
+            the number of fresh failed steps.
+        """
+        buffer = self.hard_negative_buffer
+        assert buffer is not None, "hard_negative_buffer is built when online.hard_negatives is True"
+        states = np.concatenate([s.real_states for s in segments])  # [k, D]
+        real_next = np.concatenate([s.real_next_states for s in segments])  # [k, D]
+        planned_next = np.concatenate([s.planned[1:] for s in segments])  # [k, D]
+        if self.online.hard_negative_reach:
+            step = np.abs(real_next - states).max(axis=0)  # [D]
+            self._hard_reach = step if self._hard_reach is None else np.maximum(self._hard_reach, step)
+            planned_next = states + np.clip(planned_next - states, -self._hard_reach, self._hard_reach)  # [k, D]
+        failed = self._deviation(real_next, planned_next, reduce="max") > self.online.hard_negative_threshold  # [k]
+        fresh = TransitionBatch(states[failed], planned_next[failed], real_next[failed])  # [F, D] each
+        replay_count = min(len(buffer), int(self.online.hard_negative_batch))
+        if replay_count > 0:
+            replay = buffer.sample(replay_count)  # [R, D] each
+            assert replay.actions is not None
+            batch = TransitionBatch(
+                np.concatenate([fresh.states, replay.states]),  # [F + R, D]
+                np.concatenate([fresh.next_states, replay.next_states]),  # [F + R, D]
+                np.concatenate([fresh.actions, replay.actions]),  # [F + R, D]
+            )
+        else:
+            batch = fresh
+        if failed.any():
+            buffer.add(fresh.states, fresh.next_states, fresh.actions)
+        return (batch if len(batch) > 0 else None), int(failed.sum())
+
     def _gradient_step(
-        self, pos_states: np.ndarray, pos_next: np.ndarray, neg_states: np.ndarray, neg_next: np.ndarray
+        self,
+        pos_states: np.ndarray,
+        pos_next: np.ndarray,
+        neg_states: np.ndarray,
+        neg_next: np.ndarray,
+        hard: TransitionBatch | None = None,
     ) -> dict[str, float]:
         """One optimiser step on the contrastive loss; refuses to write non-finite weights.
 
@@ -391,6 +455,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param pos_next: [P, D] real next states.
         :param neg_states: [M, D] planned states.
         :param neg_next: [M, D] planned next states.
+        :param hard: failed plan steps (``online.hard_negatives``): states s_t [H, D], next_states s'_plan [H, D],
+            actions s'_real [H, D]; None for none. Not used by ``loss="infonce_reach"`` and ``"infonce"``.
         :return: loss statistics.
         :raises FloatingPointError: on a NaN/inf loss or gradient (the weights are left untouched).
         """
@@ -413,7 +479,17 @@ class EBMPlannerAgent(PlannerAgentBase):
         else:
             energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
             if self.loss == "cd":
-                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+                if hard is not None and self.online.hard_negative_loss == "negatives":
+                    loss, stats = self._cd_with_hard_negatives(energy_pos, energy_neg, hard)
+                else:
+                    loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+                if hard is not None and self.online.hard_negative_loss == "margin":
+                    hard_states = as_tensor(hard.states)  # [H, D]
+                    energy_failed = energy(hard_states, as_tensor(hard.next_states))  # [H]
+                    energy_real = energy(hard_states, as_tensor(hard.actions))  # [H]
+                    term, hard_stats = hard_negative_margin_loss(energy_failed, energy_real, self.online.hard_negative_margin)
+                    loss = loss + self.online.hard_negative_weight * term
+                    stats.update(hard_stats, loss=float(loss.detach()))
             else:
                 loss, stats = info_nce_loss(energy_pos, energy_neg)
         optimizer = self.policy.optimizer
@@ -431,6 +507,41 @@ class EBMPlannerAgent(PlannerAgentBase):
         optimizer.step()
         stats["energy_gap"] = stats["energy_neg"] - stats["energy_pos"]
         return stats
+
+    def _cd_with_hard_negatives(
+        self, energy_pos: torch.Tensor, energy_neg: torch.Tensor, hard: TransitionBatch
+    ) -> tuple[torch.Tensor, dict[str, float]]:
+        """The CD loss with the failed steps among its negatives (``hard_negative_loss="negatives"``).
+
+        E(x-) becomes the weighted mean over the planned negatives (weight 1 each) and the failed steps (weight
+        ``hard_negative_weight`` each), in both the contrastive and the L2 term.
+
+        :param energy_pos: [P] energies of the real transitions.
+        :param energy_neg: [M] energies of the planned transitions.
+        :param hard: the failed steps (states [H, D], next_states s'_plan [H, D]).
+        :return: the scalar loss and its statistics (``energy_failed`` added).
+        """
+        as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
+        energy_failed = self.energy_model(as_tensor(hard.states), as_tensor(hard.next_states))  # [H]
+        weights = torch.cat(
+            [torch.ones_like(energy_neg), torch.full_like(energy_failed, self.online.hard_negative_weight)]
+        )  # [M + H]
+        weights = weights / weights.sum()
+        negatives = torch.cat([energy_neg, energy_failed])  # [M + H]
+        mean_pos, mean_neg = energy_pos.mean(), (weights * negatives).sum()
+        loss_ml = mean_pos - mean_neg
+        loss_l2 = energy_pos.square().mean() + (weights * negatives.square()).sum()
+        loss = loss_ml + self.l2_coeff * loss_l2
+        stats = {
+            "energy_pos": float(mean_pos.detach()),
+            "energy_neg": float(mean_neg.detach()),
+            "energy_failed": float(energy_failed.detach().mean()),
+            "num_failed": float(len(energy_failed)),
+            "loss": float(loss.detach()),
+            "loss_ml": float(loss_ml.detach()),
+            "loss_l2": float(loss_l2.detach()),
+        }
+        return loss, stats
 
     def _update_reach_radius(self, states: np.ndarray, next_states: np.ndarray) -> torch.Tensor:
         """The half-width of the reach box: the largest real |s' - s| per dim seen so far (the dataset's offline).

@@ -10,6 +10,9 @@ from typing import Any, TypeVar
 
 T = TypeVar("T")
 
+HARD_NEGATIVE_LOSSES = ("margin", "negatives")
+"""Values of ``OnlineConfig.hard_negative_loss``."""
+
 
 @dataclass
 class OnlineConfig:
@@ -38,6 +41,31 @@ class OnlineConfig:
     :param max_iterations: cap on the planner's iterations.
     :param reinit_energy: re-initialise (instead of warm-start) a plan whose mean transition energy exceeds this.
     :param train_every_plan: take one gradient step per finished plan segment (Algorithm 1).
+    :param hard_negatives: keep the failed plan steps as labelled negatives (issue #34; EBM agent only, off by
+        default). A step fails when the real next state s'_real misses the planned one s'_plan by more than
+        ``hard_negative_threshold`` (max over the model dims): the agent aimed from the real s_t at s'_plan (with
+        ``closed_loop``) and the env did not get there, e.g. it kept the agent at a wall. (s_t, s'_plan) is then a
+        transition known to be impossible, from what the agent observed only (never the env's map). Such triples
+        (s_t, s'_plan, s'_real) go to a buffer of their own, and each gradient step adds
+        ``hard_negative_weight`` x a term over the fresh ones plus ``hard_negative_batch`` replayed ones (see
+        ``hard_negative_loss``). The label is exact only with exact inverse dynamics in a deterministic env: with a
+        learned inverse model or a noisy env a miss may be the model's error or noise, not an impossible move.
+    :param hard_negative_reach: clip each failed target into the one-step reach box around s_t before labelling it,
+        s'_try = s_t + clip(s'_plan - s_t, -r, r) with r [D] the largest |s' - s| of the real transitions seen so far
+        (updated with the segment's own before its steps are labelled), and count a step as failed only when
+        s'_real misses s'_try. A plan that jumps further than one step can reach then yields the in-reach move the
+        env was asked for and refused (at a wall: a move of one step into it), not the far jump itself, and an
+        over-long jump in the open, which the env executes up to its reach, yields none. Exact for envs whose
+        moves are a per-dim box (the point envs); off by default.
+    :param hard_negative_threshold: per-dim miss |s'_plan - s'_real| above which a step counts as failed, in state
+        units (0.01: a fifth of a maze step of 0.05; the point envs' inverse dynamics is exact to 1e-7).
+    :param hard_negative_buffer_size: capacity of the failed-step buffer (1e4).
+    :param hard_negative_batch: failed steps replayed from that buffer per gradient step (64), beside the fresh ones.
+    :param hard_negative_weight: weight of the hard-negative term in the loss (1.0).
+    :param hard_negative_margin: margin m of ``hard_negative_loss="margin"`` (1.0).
+    :param hard_negative_loss: ``"margin"``: mean softplus(m - (E(s_t, s'_plan) - E(s_t, s'_real))), a ranking term
+        that wants each failed step at least m above the real transition from the same state; ``"negatives"``:
+        the failed steps join the contrastive loss's negatives (the weight scales their share of its mean E(x-)).
     """
 
     deviation_threshold: float = 0.7
@@ -55,15 +83,35 @@ class OnlineConfig:
     max_iterations: int = 800
     reinit_energy: float = 1.0
     train_every_plan: bool = True
+    hard_negatives: bool = False
+    hard_negative_reach: bool = False
+    hard_negative_threshold: float = 0.01
+    hard_negative_buffer_size: int = 10_000
+    hard_negative_batch: int = 64
+    hard_negative_weight: float = 1.0
+    hard_negative_margin: float = 1.0
+    hard_negative_loss: str = "margin"
 
     def __post_init__(self) -> None:
         check_field_types(self)
+        if not self.hard_negative_threshold > 0:
+            raise ValueError(f"OnlineConfig.hard_negative_threshold must be > 0, got {self.hard_negative_threshold!r}.")
+        if not self.hard_negative_weight >= 0:
+            raise ValueError(f"OnlineConfig.hard_negative_weight must be >= 0, got {self.hard_negative_weight!r}.")
+        if not self.hard_negative_margin >= 0:
+            raise ValueError(f"OnlineConfig.hard_negative_margin must be >= 0, got {self.hard_negative_margin!r}.")
+        if int(self.hard_negative_batch) < 0:
+            raise ValueError(f"OnlineConfig.hard_negative_batch must be >= 0, got {self.hard_negative_batch!r}.")
+        if self.hard_negative_loss not in HARD_NEGATIVE_LOSSES:
+            raise ValueError(
+                f"OnlineConfig.hard_negative_loss must be one of {HARD_NEGATIVE_LOSSES}, got {self.hard_negative_loss!r}."
+            )
         for name in ("deviation_threshold", "replan_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
         if not 0.0 <= self.neg_replay_prob <= 1.0:
             raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
-        for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations"):
+        for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations", "hard_negative_buffer_size"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"OnlineConfig.{name} must be >= 1, got {getattr(self, name)!r}.")
 

@@ -6,7 +6,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-__all__ = ["contrastive_divergence_loss", "info_nce_loss", "reach_candidates"]
+__all__ = ["contrastive_divergence_loss", "hard_negative_margin_loss", "info_nce_loss", "reach_candidates"]
 
 
 def contrastive_divergence_loss(
@@ -50,6 +50,40 @@ def contrastive_divergence_loss(
         "loss_l2": float(loss_l2.detach()),
     }
     return loss, stats
+
+
+def hard_negative_margin_loss(
+    energy_failed: Tensor, energy_real: Tensor, margin: float = 1.0
+) -> tuple[Tensor, dict[str, float]]:
+    """
+    Ranking term of the failed plan steps (``OnlineConfig.hard_negatives``, issue #34):
+    ``mean softplus(margin - (E(s, s'_plan) - E(s, s'_real)))``.
+
+    Each failed step (s, s'_plan), a move the env refused, is paired with the real transition (s, s'_real) from the
+    same state; the term wants the failed one at least ``margin`` higher and fades (softly) once it is. Both
+    energies keep their gradients: the pair's gap is what is trained, not either energy's level (the contrastive
+    loss's L2 term sets the level).
+
+    :param energy_failed: [H] energies of the failed steps E(s, s'_plan).
+    :param energy_real: [H] energies of the real transitions from the same states E(s, s'_real).
+    :param margin: wanted gap (>= 0).
+    :return: the scalar term and floats ``{"energy_failed", "energy_failed_real", "loss_hard", "num_failed"}``.
+    :raises ValueError: for an empty batch or mismatched shapes.
+    """
+    _check_nonempty(energy_failed, "energy_failed")
+    if energy_failed.shape != energy_real.shape:
+        raise ValueError(
+            f"energy_failed and energy_real must pair up (same shape), got {tuple(energy_failed.shape)} and "
+            f"{tuple(energy_real.shape)}."
+        )
+    term = F.softplus(margin - (energy_failed - energy_real)).mean()
+    stats = {
+        "energy_failed": float(energy_failed.detach().mean()),
+        "energy_failed_real": float(energy_real.detach().mean()),
+        "loss_hard": float(term.detach()),
+        "num_failed": float(energy_failed.numel()),
+    }
+    return term, stats
 
 
 def info_nce_loss(energy_pos: Tensor, energy_neg: Tensor, temperature: float = 1.0) -> tuple[Tensor, dict[str, float]]:
