@@ -38,6 +38,10 @@ class OnlineConfig:
     :param max_iterations: cap on the planner's iterations.
     :param reinit_energy: re-initialise (instead of warm-start) a plan whose mean transition energy exceeds this.
     :param train_every_plan: take one gradient step per finished plan segment (Algorithm 1).
+    :param random_action_prob: during ``learn``, replace each env step's action by a uniform random one in the
+        action bounds with this probability (the plan's segment then ends on its deviation as usual). 0 (off, the
+        paper's): an energy learned only from its own plans' transitions never sees the moves its plans avoid (e.g.
+        Reacher's full torques), so it keeps calling them unlikely.
     """
 
     deviation_threshold: float = 0.7
@@ -55,12 +59,15 @@ class OnlineConfig:
     max_iterations: int = 800
     reinit_energy: float = 1.0
     train_every_plan: bool = True
+    random_action_prob: float = 0.0
 
     def __post_init__(self) -> None:
         check_field_types(self)
         for name in ("deviation_threshold", "replan_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
+        if not 0.0 <= self.random_action_prob <= 1.0:
+            raise ValueError(f"OnlineConfig.random_action_prob must be in [0, 1], got {self.random_action_prob!r}.")
         if not 0.0 <= self.neg_replay_prob <= 1.0:
             raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
         for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations"):
