@@ -431,7 +431,9 @@ class EBMPlannerAgent(PlannerAgentBase):
                 # negatives weigh equally whatever their numbers: L = E+ - (E-_plan + E-_pert) / 2 + l2 (...).
                 mean_perturbed = energy_perturbed.mean()
                 loss = 0.5 * loss + 0.5 * (
-                    energy_pos.mean() - mean_perturbed + self.l2_coeff * (energy_pos.square().mean() + energy_perturbed.square().mean())
+                    energy_pos.mean()
+                    - mean_perturbed
+                    + self.l2_coeff * (energy_pos.square().mean() + energy_perturbed.square().mean())
                 )
                 stats.update(energy_perturbed=float(mean_perturbed.detach()), loss=float(loss.detach()))
             elif self.loss == "cd":

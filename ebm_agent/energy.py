@@ -320,8 +320,10 @@ class EnergyModel(nn.Module):
         """
         if not self.config.move_input:
             return
-        self.move_mean.copy_(torch.as_tensor(mean, dtype=self.move_mean.dtype))  # type: ignore[operator]
-        self.move_std.copy_(torch.as_tensor(std, dtype=self.move_std.dtype).clamp_min(1e-6))  # type: ignore[operator]
+        move_mean: Tensor = self.move_mean  # type: ignore[assignment]
+        move_std: Tensor = self.move_std  # type: ignore[assignment]
+        move_mean.copy_(torch.as_tensor(mean, dtype=move_mean.dtype))
+        move_std.copy_(torch.as_tensor(std, dtype=move_std.dtype).clamp_min(1e-6))
 
     def inference_evaluator(self, dtype: torch.dtype | None = None, fused: bool = True) -> TransitionEvaluator | None:
         """

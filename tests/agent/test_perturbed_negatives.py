@@ -13,7 +13,9 @@ from ebm_agent import EBMPlannerAgent, collect_random_transitions
 
 
 def make_agent(**kwargs: object) -> EBMPlannerAgent:
-    return EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Reacher-v0"), seed=0, image_log_interval=0, device="cpu", **kwargs)
+    return EBMPlannerAgent(
+        "MultiInputPolicy", gym.make("ebm/Reacher-v0"), seed=0, image_log_interval=0, device="cpu", **kwargs
+    )
 
 
 def test_perturbed_next_states_follow_the_real_moves_scale() -> None:
@@ -31,7 +33,7 @@ def test_perturbed_next_states_follow_the_real_moves_scale() -> None:
     wrap_states = np.tile(np.array([[0.99, 0.0, 0.0, 0.0], [-0.99, 0.0, 0.0, 0.0]], np.float32), (50, 1))
     wrap_next = np.tile(np.array([[-0.99, 0.0, 0.0, 0.0], [0.99, 0.0, 0.0, 0.0]], np.float32), (50, 1))
     agent._perturbed_next_states(wrap_states, wrap_next)
-    count, total, squares = agent._move_stats
+    count, _total, squares = agent._move_stats
     assert np.sqrt(squares[0] / count[0]) == pytest.approx(0.02, abs=1e-5)
 
 
