@@ -51,7 +51,7 @@ EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "rev
 """The keywords of ``explore`` and their defaults: transitions between rebuilds of the graph, and the weights of
 :class:`~ebm_agent.subgoals.FrontierSubgoals`."""
 
-LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach")
+LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach", "infonce_perturb")
 """Energy objectives by name (``loss=``)."""
 
 PLANNERS: dict[str, tuple[type, type]] = {"mppi": (MPPIPlanner, MPPIConfig), "langevin": (LangevinPlanner, LangevinConfig)}
@@ -117,9 +117,19 @@ class EBMPlannerAgent(PlannerAgentBase):
         nats: a transition E higher than another is e^E times less likely under the data's policy; ``l2_coeff`` then
         weighs a term mean E(s, s')^2 over the real transitions that pins their energy to 0, since InfoNCE alone
         leaves a free offset per state. That loss ignores the planned and sampled negatives. Off by default (the
-        paper's CD).
+        paper's CD). ``"infonce_perturb"``: the same objective and anchor with the ``perturbed_negatives`` near misses
+        of each real s' (Gaussian, per-dim scale of the real moves) as its contrast set instead of the reach box, so
+        that the energy resolves next states finer than the box: conditional on s, it carries no term of the
+        visited states' density, which the planned negatives of CD put into it.
     :param reach_candidates: K, uniform candidates per positive of ``loss="infonce_reach"`` (64); unused otherwise.
     :param l2_coeff: weight of the energy-magnitude regulariser of the CD loss (1.0).
+    :param perturbed_negatives: M > 0 adds, to the CD loss, M negatives per real transition (s, s'): (s, s' + eps)
+        with eps ~ N(0, (c std(s' - s))^2) per state dim, c drawn per negative from ``perturb_scales`` and std the
+        running std of the real moves (periodic dims wrapped). Where the env's next states lie on a thin set (fewer
+        action than state dims, e.g. Reacher's angles that must move by their velocities), such near misses are
+        transitions it cannot make, which the planned negatives alone rarely show the energy. The loss then weighs
+        the planned and the perturbed negatives' means equally. 0 (off, the paper's).
+    :param perturb_scales: the noise scales c of ``perturbed_negatives``, in units of the real moves' per-dim std.
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"`` or an instance.
@@ -160,6 +170,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         loss: str = "cd",
         l2_coeff: float = 1.0,
         reach_candidates: int = 64,
+        perturbed_negatives: int = 0,
+        perturb_scales: Sequence[float] = (0.25, 0.5, 1.0, 2.0),
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
@@ -194,25 +206,23 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.loss = loss
         self.l2_coeff = l2_coeff
         self.reach_candidates = reach_candidates
+        if isinstance(perturbed_negatives, bool) or not isinstance(perturbed_negatives, int) or perturbed_negatives < 0:
+            raise ValueError(f"perturbed_negatives must be an int >= 0, got {perturbed_negatives!r}.")
+        if loss == "infonce_perturb" and perturbed_negatives < 1:
+            raise ValueError("loss='infonce_perturb' needs perturbed_negatives >= 1 (its contrast set per real transition).")
+        scales = tuple(float(c) for c in perturb_scales)
+        if not scales or not all(np.isfinite(c) and c > 0 for c in scales):
+            raise ValueError(f"perturb_scales must be a non-empty sequence of finite scales > 0, got {perturb_scales!r}.")
+        self.perturbed_negatives = perturbed_negatives
+        self.perturb_scales = scales
+        self._move_stats: np.ndarray | None = None  # [3, D]: count, sum and sum of squares of the real moves s' - s
+        self._move_std: np.ndarray | None = None  # [D] their std as of the current gradient step
         self._reach_radius: torch.Tensor | None = None  # [D] largest real |s' - s| seen, for loss="infonce_reach"
         self._hard_reach: np.ndarray | None = None  # [D] the same, for online.hard_negative_reach
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
-        if subgoal_graph is not None:
-            unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
-            if not isinstance(subgoal_graph, dict) or unknown:
-                raise ValueError(
-                    f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
-                    f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
-                )
+        _check_long_horizon(subgoal_graph, explore)
         self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
-        if explore is not None:
-            unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
-            if not isinstance(explore, dict) or unknown:
-                raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
-            every = explore.get("every", EXPLORE_DEFAULTS["every"])
-            if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-                raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
         self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
         self.extra_energies: list[ExtraEnergy] = []
         super().__init__(
@@ -233,6 +243,11 @@ class EBMPlannerAgent(PlannerAgentBase):
             raise ValueError(
                 f"online.hard_negatives adds a term to the CD loss; loss={loss!r} would ignore the failed steps. "
                 "Use loss='cd' or leave hard_negatives False."
+            )
+        if self.online.hard_negatives and perturbed_negatives > 0:
+            raise ValueError(
+                "online.hard_negatives and perturbed_negatives are two different CD losses and cannot be combined; "
+                "set one of them."
             )
         self.plan_iterations = int(getattr(self.planner_config, "iterations", 0) or 0)
         self._energy_gaps: list[float] = []
@@ -304,6 +319,8 @@ class EBMPlannerAgent(PlannerAgentBase):
             "_negative_radius",
             "_reach_radius",
             "_hard_reach",
+            "_move_stats",
+            "_move_std",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -461,14 +478,20 @@ class EBMPlannerAgent(PlannerAgentBase):
         :raises FloatingPointError: on a NaN/inf loss or gradient (the weights are left untouched).
         """
         energy = self.energy_model
+        self._move_std = None
+        if self.perturbed_negatives > 0 or self.energy_config.move_input:
+            self._move_std = self._update_move_statistics(pos_states, pos_next)
         self.policy.set_training_mode(True)
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         states = as_tensor(pos_states)  # [P, D]
         energy_pos = energy(states, as_tensor(pos_next))  # [P]
-        if self.loss == "infonce_reach":
-            candidates = reach_candidates(
-                states, self._update_reach_radius(pos_states, pos_next), self.reach_candidates, self._generator
-            )  # [P, K, D]
+        if self.loss in ("infonce_reach", "infonce_perturb"):
+            if self.loss == "infonce_reach":
+                candidates = reach_candidates(
+                    states, self._update_reach_radius(pos_states, pos_next), self.reach_candidates, self._generator
+                )  # [P, K, D]
+            else:
+                candidates = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, K, D]
             energy_neg = energy(states[:, None, :].expand_as(candidates), candidates)  # [P, K]
             loss, stats = info_nce_loss(energy_pos, energy_neg)
             # InfoNCE fixes E(s, .) only up to a constant per s; pinning the real transitions' energy to 0 makes
@@ -478,7 +501,20 @@ class EBMPlannerAgent(PlannerAgentBase):
             stats.update(loss_anchor=float(anchor.detach()), loss=float(loss.detach()))
         else:
             energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
-            if self.loss == "cd":
+            if self.loss == "cd" and self.perturbed_negatives > 0:
+                perturbed = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, M', D]
+                energy_perturbed = energy(states[:, None, :].expand_as(perturbed), perturbed)  # [P, M']
+                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+                # The perturbed negatives as a second CD term on the same positives, so that planned and perturbed
+                # negatives weigh equally whatever their numbers: L = E+ - (E-_plan + E-_pert) / 2 + l2 (...).
+                mean_perturbed = energy_perturbed.mean()
+                loss = 0.5 * loss + 0.5 * (
+                    energy_pos.mean()
+                    - mean_perturbed
+                    + self.l2_coeff * (energy_pos.square().mean() + energy_perturbed.square().mean())
+                )
+                stats.update(energy_perturbed=float(mean_perturbed.detach()), loss=float(loss.detach()))
+            elif self.loss == "cd":
                 if hard is not None and self.online.hard_negative_loss == "negatives":
                     loss, stats = self._cd_with_hard_negatives(energy_pos, energy_neg, hard)
                 else:
@@ -542,6 +578,45 @@ class EBMPlannerAgent(PlannerAgentBase):
             "loss_l2": float(loss_l2.detach()),
         }
         return loss, stats
+
+    def _update_move_statistics(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
+        """Add real transitions to the running mean and std of the real moves s' - s (periodic dims wrapped), pass them
+        to the energy (``EnergyConfig.move_input``) and return the std.
+
+        :param states: [P, D] real states.
+        :param next_states: [P, D] their real next states.
+        :return: [D] std of the moves so far (+1e-6).
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        moves = (next_states - states).astype(np.float64)  # [P, D]
+        if spec.goal_period is not None:
+            period, dims = spec.goal_period, spec.goal_indices
+            moves[:, dims] = np.mod(moves[:, dims] + 0.5 * period, period) - 0.5 * period
+        update = np.stack([np.full(moves.shape[1], len(moves), dtype=np.float64), moves.sum(0), np.square(moves).sum(0)])
+        self._move_stats = update if self._move_stats is None else self._move_stats + update
+        count, total, squares = self._move_stats
+        mean = total / count
+        std = np.sqrt(np.maximum(squares / count - np.square(mean), 0.0)) + 1e-6  # [D]
+        self.energy_model.set_move_statistics(mean, std)
+        return std
+
+    def _perturbed_next_states(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
+        """``perturbed_negatives`` near misses of each real next state: s' + N(0, (c std(s' - s))^2), c from
+        ``perturb_scales``, std the running std of the real moves (updated with these transitions unless the gradient
+        step already did).
+
+        :param states: [P, D] real states.
+        :param next_states: [P, D] their real next states.
+        :return: [P, M, D] perturbed next states (float32).
+        """
+        std = self._move_std if self._move_std is not None else self._update_move_statistics(states, next_states)
+        shape = (len(states), self.perturbed_negatives, states.shape[1])
+        scales = torch.as_tensor(self.perturb_scales, dtype=torch.float32, device=self.device)
+        pick = torch.randint(len(self.perturb_scales), shape[:2], generator=self._generator, device=self.device)
+        noise = torch.randn(shape, generator=self._generator, device=self.device) * scales[pick][..., None]  # [P, M, D]
+        noise = noise * torch.as_tensor(std, dtype=torch.float32, device=self.device)
+        return (torch.as_tensor(next_states, dtype=torch.float32, device=self.device)[:, None, :] + noise).cpu().numpy()
 
     def _update_reach_radius(self, states: np.ndarray, next_states: np.ndarray) -> torch.Tensor:
         """The half-width of the reach box: the largest real |s' - s| per dim seen so far (the dataset's offline).
@@ -668,7 +743,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         return self.subgoals
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
-        if self.loss == "infonce_reach":  # its contrast set is drawn in the gradient step
+        if self.loss in ("infonce_reach", "infonce_perturb"):  # its contrast set is drawn in the gradient step
             neg_states, neg_next = states, next_states
         else:
             negatives = self._sample_negatives(states, self._negative_radius, self._num_candidates)
@@ -711,6 +786,29 @@ class EBMPlannerAgent(PlannerAgentBase):
 
         figure = plan_figure(self.energy_model, spec.state_low, spec.state_high, segment.planned, segment.real_next_states)
         self.logger.record("plan/energy_map", Figure(figure, close=True), exclude=("stdout", "log", "json", "csv"))
+
+
+def _check_long_horizon(subgoal_graph: Any, explore: Any) -> None:
+    """Refuse a ``subgoal_graph`` or ``explore`` argument that is not None or a dict of known keywords.
+
+    :param subgoal_graph: the ``EBMPlannerAgent`` argument.
+    :param explore: the ``EBMPlannerAgent`` argument.
+    :raises ValueError: naming the unknown keywords or the bad value.
+    """
+    if subgoal_graph is not None:
+        unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
+        if not isinstance(subgoal_graph, dict) or unknown:
+            raise ValueError(
+                f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
+                f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
+            )
+    if explore is not None:
+        unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
+        if not isinstance(explore, dict) or unknown:
+            raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
+        every = explore.get("every", EXPLORE_DEFAULTS["every"])
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
 
 
 class _FrontierRebuild(BaseCallback):

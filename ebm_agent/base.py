@@ -325,6 +325,22 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             actions[missing] = inverse(origin[missing], plans[rows, steps + 1][missing])
         return np.clip(actions, spec.action_low, spec.action_high).astype(np.float32)
 
+    def _explore(self, actions: np.ndarray) -> np.ndarray:
+        """Replace each env's action by a uniform random one in the action bounds with probability
+        ``online.random_action_prob`` (its own seeded stream, so the planner's noise is unchanged).
+
+        :param actions: [N, A] planned actions.
+        :return: [N, A] actions to take.
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        rng = getattr(self, "_explore_rng", None)
+        if rng is None:
+            rng = self._explore_rng = np.random.default_rng(self._base_seed() + 7)
+        replace = rng.random(len(actions)) < self.online.random_action_prob  # [N]
+        random = rng.uniform(spec.action_low, spec.action_high, size=actions.shape).astype(actions.dtype)  # [N, A]
+        return np.where(replace[:, None], random, actions)
+
     def _align_periodic(self, plans: np.ndarray, states: np.ndarray) -> None:
         """Move warm-start plans by whole periods of their periodic dims so that each starts next to its env's state.
 
@@ -555,6 +571,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 steps[idx], need[idx] = 0, False
                 self.num_plans += len(idx)
             actions = self._actions(states, plans, planned_actions, steps)
+            if self.online.random_action_prob > 0:
+                actions = self._explore(actions)
             new_obs, rewards, dones, infos = env.step(actions)
             self.num_timesteps += n
             real_next = np.asarray(new_obs["observation"], dtype=np.float32).copy()  # type: ignore[call-overload,index]

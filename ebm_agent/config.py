@@ -66,6 +66,10 @@ class OnlineConfig:
     :param hard_negative_loss: ``"margin"``: mean softplus(m - (E(s_t, s'_plan) - E(s_t, s'_real))), a ranking term
         that wants each failed step at least m above the real transition from the same state; ``"negatives"``:
         the failed steps join the contrastive loss's negatives (the weight scales their share of its mean E(x-)).
+    :param random_action_prob: during ``learn``, replace each env step's action by a uniform random one in the
+        action bounds with this probability (the plan's segment then ends on its deviation as usual). 0 (off, the
+        paper's): an energy learned only from its own plans' transitions never sees the moves its plans avoid (e.g.
+        Reacher's full torques), so it keeps calling them unlikely.
     """
 
     deviation_threshold: float = 0.7
@@ -91,6 +95,7 @@ class OnlineConfig:
     hard_negative_weight: float = 1.0
     hard_negative_margin: float = 1.0
     hard_negative_loss: str = "margin"
+    random_action_prob: float = 0.0
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -109,6 +114,8 @@ class OnlineConfig:
         for name in ("deviation_threshold", "replan_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
+        if not 0.0 <= self.random_action_prob <= 1.0:
+            raise ValueError(f"OnlineConfig.random_action_prob must be in [0, 1], got {self.random_action_prob!r}.")
         if not 0.0 <= self.neg_replay_prob <= 1.0:
             raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
         for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations", "hard_negative_buffer_size"):

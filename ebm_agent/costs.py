@@ -482,7 +482,10 @@ def weighted_mean_square(values: Tensor, weight: float) -> Tensor:
     :return: [N, K].
     """
     count = values.shape[-2] * values.shape[-1]
-    return torch.linalg.vector_norm(values, dim=(-2, -1)).square_().mul_(weight / max(count, 1))
+    norm = torch.linalg.vector_norm(values, dim=(-2, -1))
+    if values.requires_grad:  # the norm's backward needs its output: no in-place ops (the Langevin planner's gradient)
+        return norm.square().mul(weight / max(count, 1))
+    return norm.square_().mul_(weight / max(count, 1))
 
 
 def check_goals(goals: Tensor, plans: Tensor, goal_dim: int) -> None:

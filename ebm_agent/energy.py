@@ -7,6 +7,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn.utils import parametrize
@@ -39,6 +40,11 @@ class EnergyConfig:
         (issue #34). 0 (off, the original's).
     :param fourier_scale: standard deviation of the Fourier frequencies, in cycles per unit of the input (2.0: best of
         1, 2, 4, 8, 16 on the maze probe; 16 collapses the energy to a constant).
+    :param move_input: also feed the move s' - s (periodic dims wrapped), standardised per dim by the model's
+        ``move_mean`` and ``move_std`` buffers (the agent sets them from the real moves it trains on). A move much
+        smaller than the state's range (Reacher's angles change by ~0.01 a step while its velocities change by ~0.2)
+        is then an O(1) input, so that relations between the dims of a move (angles that change by their velocities)
+        are near-linear in the input. Off (the original's).
     """
 
     hidden_dim: int = 128
@@ -50,6 +56,7 @@ class EnergyConfig:
     difference_input: bool = False
     fourier_features: int = 0
     fourier_scale: float = 2.0
+    move_input: bool = False
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -189,11 +196,17 @@ class EnergyModel(nn.Module):
         feature_dim = state_dim if self.features is None else self.features.feature_dim  # F
 
         cfg = self.config
+        self.periodic_dims = normalise_dims(periodic_dims, state_dim, "periodic_dims")  # wrapped in the move input
+        self.period = float(period)
+        extra = state_dim if cfg.move_input else 0  # the standardised move, appended after the pair (and its Fourier features)
+        if cfg.move_input:
+            self.register_buffer("move_mean", torch.zeros(state_dim))  # [D]
+            self.register_buffer("move_std", torch.ones(state_dim))  # [D]
         self.fourier = (
             FourierFeatures(2 * feature_dim, cfg.fourier_features, cfg.fourier_scale) if cfg.fourier_features else None
         )
         self.net = build_mlp(
-            2 * feature_dim if self.fourier is None else self.fourier.out_dim,
+            (2 * feature_dim if self.fourier is None else self.fourier.out_dim) + extra,
             1,
             hidden_dim=cfg.hidden_dim,
             num_hidden_layers=cfg.num_hidden_layers,
@@ -252,6 +265,7 @@ class EnergyModel(nn.Module):
         if states.ndim == 0 or states.shape[-1] != self.state_dim:
             raise ValueError(f"EnergyModel: expected states of shape [..., {self.state_dim}], got {tuple(states.shape)}.")
         leading = states.shape[:-1]
+        move = self.standardised_move(states, next_states).reshape(-1, self.state_dim) if self.config.move_input else None
         if self.features is not None:
             states, next_states = self.features(states), self.features(next_states)  # [..., F] each
         pairs = torch.cat([states, next_states], dim=-1).reshape(-1, 2 * self.feature_dim)  # [M, 2F]
@@ -265,7 +279,51 @@ class EnergyModel(nn.Module):
             pairs = torch.cat([first, second - first], dim=1)
         if self.fourier is not None:
             pairs = self.fourier(pairs)  # [M, 2F + 2 * fourier_features]
+        if move is not None:
+            pairs = torch.cat([pairs, move.to(pairs.dtype)], dim=1)  # [M, ... + D]
         return self.net(pairs).reshape(leading)  # [M, 1] -> [...]
+
+    def raw_move(self, states: Tensor, next_states: Tensor) -> Tensor:
+        """s' - s with the periodic dims wrapped into [-period/2, period/2); masked dims are zero.
+
+        :param states: [..., D].
+        :param next_states: [..., D].
+        :return: [..., D].
+        """
+        move = next_states - states
+        if self.periodic_dims:
+            index = torch.tensor(self.periodic_dims, device=move.device)
+            half = 0.5 * self.period
+            move = move.index_copy(-1, index, torch.remainder(move.index_select(-1, index) + half, self.period) - half)
+        if self.masked_dims:
+            keep = torch.ones(self.state_dim, dtype=move.dtype, device=move.device)
+            keep[list(self.masked_dims)] = 0.0
+            move = move * keep
+        return move
+
+    def standardised_move(self, states: Tensor, next_states: Tensor) -> Tensor:
+        """(raw move - move_mean) / move_std, the ``move_input`` features.
+
+        :param states: [..., D].
+        :param next_states: [..., D].
+        :return: [..., D].
+        """
+        mean: Tensor = self.move_mean  # type: ignore[assignment]
+        std: Tensor = self.move_std  # type: ignore[assignment]
+        return (self.raw_move(states, next_states) - mean.to(states.dtype)) / std.to(states.dtype)
+
+    def set_move_statistics(self, mean: Tensor | np.ndarray, std: Tensor | np.ndarray) -> None:
+        """Set the standardisation of ``move_input`` (no effect without it).
+
+        :param mean: [D] mean real move.
+        :param std: [D] std of the real moves, > 0.
+        """
+        if not self.config.move_input:
+            return
+        move_mean: Tensor = self.move_mean  # type: ignore[assignment]
+        move_std: Tensor = self.move_std  # type: ignore[assignment]
+        move_mean.copy_(torch.as_tensor(mean, dtype=move_mean.dtype))
+        move_std.copy_(torch.as_tensor(std, dtype=move_std.dtype).clamp_min(1e-6))
 
     def inference_evaluator(self, dtype: torch.dtype | None = None, fused: bool = True) -> TransitionEvaluator | None:
         """
@@ -280,7 +338,7 @@ class EnergyModel(nn.Module):
         :return: a callable with :meth:`forward`'s signature and results, or None when the network cannot be evaluated
             that way (spectral norm in training mode, ``difference_input`` or Fourier features).
         """
-        if self.config.difference_input or self.fourier is not None:
+        if self.config.difference_input or self.fourier is not None or self.config.move_input:
             return None
         network = WorkspaceMLP.from_sequential(self.net, dtype, fused)
         if network is None:

@@ -72,7 +72,7 @@ def class_defaults(
             continue
         override = overrides.get(name)
         value = parameter.default if (name not in overrides or isinstance(override, dict)) else override
-        if name in neutral_arguments and value == neutral_arguments[name]:
+        if name in neutral_arguments and _plain(value) == _plain(neutral_arguments[name]):
             continue  # an argument added later, at the value that changes nothing
         if value is None and name in recorded_as:
             value = recorded_as[name]
