@@ -136,6 +136,8 @@ def quality_table(results: Sequence[CellResult]) -> str | None:
     """
     rows = []
     for result in results:
+        if result.cell.evaluation is not None:
+            continue  # an extra evaluation of another cell's runs: their probe is that cell's row
         records = [m["model_quality"] for _, m in result.runs if m.get("model_quality")]
         if records:
             cells = []
