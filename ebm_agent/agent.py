@@ -809,6 +809,10 @@ def _check_long_horizon(subgoal_graph: Any, explore: Any) -> None:
         every = explore.get("every", EXPLORE_DEFAULTS["every"])
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
+        for name in ("goal_heuristic", "revisit_cost"):
+            weight = explore.get(name, EXPLORE_DEFAULTS[name])
+            if isinstance(weight, bool) or not isinstance(weight, int | float) or not (np.isfinite(weight) and weight >= 0):
+                raise ValueError(f"explore[{name!r}] must be a finite number >= 0 (a cost weight), got {weight!r}.")
 
 
 class _FrontierRebuild(BaseCallback):

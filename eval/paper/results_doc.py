@@ -143,7 +143,7 @@ def quality_table(results: Sequence[CellResult]) -> str | None:
             cells = []
             for key in QUALITY_COLUMNS:
                 values = np.array([r[key] for r in records if r.get(key) is not None], dtype=np.float64)
-                cells.append(f"{values.mean():.3f} ± {values.std():.3f}" if len(values) else "-")
+                cells.append(f"{stats.mean(values):.3f} ± {stats.std(values):.3f}" if len(values) else "-")
             rows.append([result.cell.setting, result.cell.env, result.cell.label, str(len(records)), *cells])
     header = ["setting", "env", "agent", "seeds", *QUALITY_COLUMNS.values()]
     return markdown_table(header, rows) if rows else None

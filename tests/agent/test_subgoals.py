@@ -219,6 +219,10 @@ def test_the_explore_option_explores_during_learn_only():
         EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"rebuild": 5})
     with pytest.raises(ValueError, match="positive int"):
         EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"every": 0})
+    with pytest.raises(ValueError, match="revisit_cost"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"revisit_cost": float("nan")})
+    with pytest.raises(ValueError, match="goal_heuristic"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"goal_heuristic": -1.0})
 
 
 def test_while_exploring_the_evaluations_follow_the_graph_and_the_training_plans_the_frontier():
