@@ -202,6 +202,9 @@ class ActionFFAgent(PlannerAgentBase):
         False is the original's plain MSE on raw dims, in which the dims with the largest changes (the Sawyer's joint
         velocities) drown the others (docs/baselines.md, 'Standardized outputs'). ``None`` (only from ``load``)
         stands for a model saved before this option existed, which was trained without it.
+    :param subgoal_graph: graph subgoals (:class:`~ebm_agent.base.PlannerAgentBase`); Action FF has no energy, so
+        its graph's edges must be the moves it made (``{"edges": "real"}``). None (the default): plans aim at the goal.
+    :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`); None: none.
     :param stats_window_size: episodes averaged for ``rollout/*``.
     :param tensorboard_log: TensorBoard folder.
     :param verbose: verbosity.
@@ -224,6 +227,8 @@ class ActionFFAgent(PlannerAgentBase):
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
         standardize_outputs: bool | None = True,
+        subgoal_graph: dict[str, Any] | None = None,
+        explore: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -246,6 +251,8 @@ class ActionFFAgent(PlannerAgentBase):
             horizon=horizon,
             online=online,
             inverse_dynamics=inverse_dynamics,
+            subgoal_graph=subgoal_graph,
+            explore=explore,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,

@@ -8,9 +8,8 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 import torch
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.logger import Figure
-from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
+from stable_baselines3.common.type_aliases import GymEnv
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBatch, TransitionBuffer
@@ -33,7 +32,6 @@ from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_l
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
-from ebm_agent.subgoals import FrontierSubgoals, GraphSubgoals
 
 SelfEBMPlannerAgent = TypeVar("SelfEBMPlannerAgent", bound="EBMPlannerAgent")
 
@@ -43,13 +41,6 @@ GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
     "reward": RewardGoalEnergy.negative_l1,  # max-ent form (paper Sec. 3.2): -sum_t R(s_t) with R = -L1
 }
 """Goal energies by name; pass an instance to ``cost=`` for anything else."""
-
-SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience"})
-"""The keywords of ``subgoal_graph`` (:meth:`ebm_agent.subgoals.GraphSubgoals.from_transitions`)."""
-
-EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "revisit_cost": 1.0}
-"""The keywords of ``explore`` and their defaults: transitions between rebuilds of the graph, and the weights of
-:class:`~ebm_agent.subgoals.FrontierSubgoals`."""
 
 LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach", "infonce_perturb")
 """Energy objectives by name (``loss=``)."""
@@ -133,18 +124,10 @@ class EBMPlannerAgent(PlannerAgentBase):
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"`` or an instance.
-    :param subgoal_graph: long-horizon goal reaching (issue #36): keyword arguments of
-        :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}`` for its defaults), with which the agent
-        builds a graph over the real transitions it learned from at the end of ``learn_offline`` (the dataset's) and
-        of ``learn`` (its replay buffer's), and then aims each plan at a subgoal along the graph's shortest path to
-        the goal (``self.subgoals``). None (the default, the paper's): plans aim at the goal. The graph is not saved
-        with the agent: after ``load``, call :meth:`build_subgoals`.
-    :param explore: frontier exploration during ``learn`` (issue #36): a dict of ``every`` (transitions between
-        rebuilds of the graph over the replay buffer, 1000), ``goal_heuristic`` (1.0; 0 explores without regard to
-        the goal) and ``revisit_cost`` (1.0) of :class:`~ebm_agent.subgoals.FrontierSubgoals`: the plans aim along the
-        graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
-        ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
-        graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
+    :param subgoal_graph: the graph subgoals of :class:`~ebm_agent.base.PlannerAgentBase` (issue #36); its edges
+        may come from this agent's energy (the default). None (the default, the paper's): plans aim at the goal.
+    :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`). None (the
+        default, the paper's): none.
     :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
         states only); 0 disables them.
     :param stats_window_size: episodes averaged for ``rollout/*``.
@@ -221,9 +204,6 @@ class EBMPlannerAgent(PlannerAgentBase):
         self._hard_reach: np.ndarray | None = None  # [D] the same, for online.hard_negative_reach
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
-        _check_long_horizon(subgoal_graph, explore)
-        self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
-        self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
         self.extra_energies: list[ExtraEnergy] = []
         super().__init__(
             policy,
@@ -232,6 +212,8 @@ class EBMPlannerAgent(PlannerAgentBase):
             horizon=horizon,
             online=online,
             inverse_dynamics=inverse_dynamics,
+            subgoal_graph=subgoal_graph,
+            explore=explore,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,
@@ -681,66 +663,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         self._num_candidates = num_candidates
         if self.loss == "infonce_reach":
             self._update_reach_radius(dataset.states, dataset.next_states)
-        super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
-        if self.subgoal_graph is not None:
-            self.build_subgoals(dataset.states, dataset.next_states)
-        return self
-
-    def learn(
-        self: SelfEBMPlannerAgent,
-        total_timesteps: int,
-        callback: MaybeCallback = None,
-        log_interval: int = 10,
-        tb_log_name: str | None = None,
-        reset_num_timesteps: bool = True,
-        progress_bar: bool = False,
-    ) -> SelfEBMPlannerAgent:
-        """:meth:`PlannerAgentBase.learn` (with ``explore``, exploring the frontier of a graph over the replay buffer,
-        rebuilt every ``explore["every"]`` transitions), then (with ``subgoal_graph``) the subgoal graph over it."""
-        if self.explore is not None:
-            rebuild = _FrontierRebuild(int(self.explore["every"]))
-            others = [] if callback is None else list(callback) if isinstance(callback, list) else [callback]
-            callback = CallbackList([rebuild, *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in others)])
-        try:
-            super().learn(total_timesteps, callback, log_interval, tb_log_name, reset_num_timesteps, progress_bar)
-        finally:
-            self.explorer = None  # exploring ends with learn
-        if self.subgoal_graph is not None and len(self.pos_buffer) > 0:
-            real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
-            self.build_subgoals(real.states, real.next_states)
-        return self
-
-    def build_frontier(self) -> FrontierSubgoals | None:
-        """Rebuild the graph over the replay buffer and explore its frontier (``explore``'s settings) in the plans made
-        while learning; the counts of plans per cell carry over from the previous frontier. With ``subgoal_graph``,
-        the same graph also aims the plans of ``predict`` (the evaluations made during ``learn``).
-
-        :return: the frontier, also ``self.explorer``; None while the buffer is empty.
-        """
-        if len(self.pos_buffer) == 0:
-            return None
-        settings = self.explore or EXPLORE_DEFAULTS
-        real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
-        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **(self.subgoal_graph or {}))
-        counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
-        self.explorer = FrontierSubgoals(
-            graph, float(settings["goal_heuristic"]), float(settings["revisit_cost"]), plan_counts=counts
-        )
-        if self.subgoal_graph is not None:
-            self.subgoals = graph
-        self.logger.record("explore/frontiers", self.explorer.num_frontiers)
-        self.logger.record("explore/graph_nodes", len(graph.nodes))
-        return self.explorer
-
-    def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> GraphSubgoals:
-        """Build the subgoal graph (``subgoal_graph``'s settings, or the defaults) over real transitions and use it.
-
-        :param states: [M, D] real states.
-        :param next_states: [M, D] their real next states.
-        :return: the graph, also ``self.subgoals``.
-        """
-        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **(self.subgoal_graph or {}))
-        return self.subgoals
+        return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         if self.loss in ("infonce_reach", "infonce_perturb"):  # its contrast set is drawn in the gradient step
@@ -786,45 +709,3 @@ class EBMPlannerAgent(PlannerAgentBase):
 
         figure = plan_figure(self.energy_model, spec.state_low, spec.state_high, segment.planned, segment.real_next_states)
         self.logger.record("plan/energy_map", Figure(figure, close=True), exclude=("stdout", "log", "json", "csv"))
-
-
-def _check_long_horizon(subgoal_graph: Any, explore: Any) -> None:
-    """Refuse a ``subgoal_graph`` or ``explore`` argument that is not None or a dict of known keywords.
-
-    :param subgoal_graph: the ``EBMPlannerAgent`` argument.
-    :param explore: the ``EBMPlannerAgent`` argument.
-    :raises ValueError: naming the unknown keywords or the bad value.
-    """
-    if subgoal_graph is not None:
-        unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
-        if not isinstance(subgoal_graph, dict) or unknown:
-            raise ValueError(
-                f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
-                f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
-            )
-    if explore is not None:
-        unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
-        if not isinstance(explore, dict) or unknown:
-            raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
-        every = explore.get("every", EXPLORE_DEFAULTS["every"])
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
-        for name in ("goal_heuristic", "revisit_cost"):
-            weight = explore.get(name, EXPLORE_DEFAULTS[name])
-            if isinstance(weight, bool) or not isinstance(weight, int | float) or not (np.isfinite(weight) and weight >= 0):
-                raise ValueError(f"explore[{name!r}] must be a finite number >= 0 (a cost weight), got {weight!r}.")
-
-
-class _FrontierRebuild(BaseCallback):
-    """Rebuild the exploring agent's frontier (:meth:`EBMPlannerAgent.build_frontier`) every ``every`` transitions."""
-
-    def __init__(self, every: int) -> None:
-        super().__init__()
-        self.every = every
-        self._next = 0
-
-    def _on_step(self) -> bool:
-        if self.num_timesteps >= self._next:
-            if self.model.build_frontier() is not None:  # type: ignore[attr-defined]
-                self._next = self.num_timesteps + self.every
-        return True

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 from gymnasium import spaces
 from stable_baselines3.common.base_class import BaseAlgorithm
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, ConvertCallback
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.type_aliases import GymEnv, MaybeCallback
 from stable_baselines3.common.utils import configure_logger, safe_mean
@@ -29,6 +29,7 @@ from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces
 from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
 from ebm_agent.planner import shift_plan
 from ebm_agent.policy import PlanningPolicy
+from ebm_agent.subgoals import EXPLORE_DEFAULTS, FrontierRebuild, FrontierSubgoals, GraphSubgoals, check_long_horizon
 
 SelfPlannerAgent = TypeVar("SelfPlannerAgent", bound="PlannerAgentBase")
 
@@ -128,6 +129,19 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     :param online: :class:`OnlineConfig` (or a dict of its fields).
     :param inverse_dynamics: ``"ground_truth"`` (the env's ``inverse_dynamics``), ``"mlp"`` (learned), ``"rls"``
         (recursive least squares) or an :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance.
+    :param subgoal_graph: long-horizon goal reaching (issue #36): keyword arguments of
+        :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}`` for its defaults), with which the agent
+        builds a graph over the real transitions it learned from at the end of ``learn_offline`` (the dataset's) and
+        of ``learn`` (its replay buffer's), and then aims each plan at a subgoal along the graph's shortest path to
+        the goal (``self.subgoals``). Its edges come from the learned energy (``"edges": "energy"``, the default; the
+        EBM agent), from the moves the agent made (``"real"``; any agent) or both. None (the default, the paper's):
+        plans aim at the goal. The graph is not saved with the agent: after ``load``, call :meth:`build_subgoals`.
+    :param explore: frontier exploration during ``learn`` (issue #36): a dict of ``every`` (transitions between
+        rebuilds of the graph over the replay buffer, 1000), ``goal_heuristic`` (1.0; 0 explores without regard to
+        the goal) and ``revisit_cost`` (1.0) of :class:`~ebm_agent.subgoals.FrontierSubgoals`: the plans aim along the
+        graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
+        ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
+        graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
     :param stats_window_size: episodes averaged for ``rollout/*`` logs.
     :param tensorboard_log: folder of TensorBoard runs (None: no TensorBoard).
     :param verbose: 0 silent, 1 info, 2 debug.
@@ -148,6 +162,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         horizon: int = 10,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics = "ground_truth",
+        subgoal_graph: dict[str, Any] | None = None,
+        explore: dict[str, Any] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -155,6 +171,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         device: torch.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
+        check_long_horizon(subgoal_graph, explore, self)
         if env is not None and not isinstance(env, str):
             check_spaces(env.observation_space, env.action_space, owner=type(self).__name__)
         super().__init__(
@@ -181,6 +198,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self._online_loop: OnlineLoopState | None = None
         self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
         self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
+        self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
+        self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
         if _init_setup_model:
             self._setup_model()
 
@@ -519,6 +538,10 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         :param reset_num_timesteps: restart the step counter (False continues the TensorBoard curve).
         :param progress_bar: show SB3's progress bar.
         :return: self.
+
+        With ``explore``, the plans made while learning explore the frontier of a graph over the replay buffer, rebuilt
+        every ``explore["every"]`` transitions; with ``subgoal_graph``, the graph over the replay buffer aims the
+        plans of ``predict`` afterwards (:meth:`build_subgoals`).
         """
         if not isinstance(total_timesteps, (int, np.integer)) or total_timesteps < 0:
             raise ValueError(f"total_timesteps must be a non-negative int, got {total_timesteps!r}.")
@@ -531,13 +554,55 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             raise ValueError("learn() needs an env: pass it to the constructor, to load(path, env=...), or set_env().")
         if reset_num_timesteps or self._last_obs is None:
             self._online_loop = None  # SB3 resets the env: no plan in flight survives that
+        if self.explore is not None:
+            others = [] if callback is None else list(callback) if isinstance(callback, list) else [callback]
+            rebuild = FrontierRebuild(int(self.explore["every"]))
+            callback = CallbackList([rebuild, *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in others)])
         total, callback = self._setup_learn(
             int(total_timesteps), callback, reset_num_timesteps, tb_log_name or self.default_tb_log_name, progress_bar
         )
-        callback.on_training_start(locals(), globals())
-        self._run_online(total, callback, log_interval)
-        callback.on_training_end()
+        try:
+            callback.on_training_start(locals(), globals())
+            self._run_online(total, callback, log_interval)
+            callback.on_training_end()
+        finally:
+            self.explorer = None  # exploring ends with learn
+        if self.subgoal_graph is not None and len(self.pos_buffer) > 0:
+            real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+            self.build_subgoals(real.states, real.next_states)
         return self
+
+    def build_frontier(self) -> FrontierSubgoals | None:
+        """Rebuild the graph over the replay buffer and explore its frontier (``explore``'s settings) in the plans made
+        while learning; the counts of plans per cell carry over from the previous frontier. With ``subgoal_graph``,
+        the same graph also aims the plans of ``predict`` (the evaluations made during ``learn``).
+
+        :return: the frontier, also ``self.explorer``; None while the buffer is empty.
+        """
+        if len(self.pos_buffer) == 0:
+            return None
+        settings = self.explore or EXPLORE_DEFAULTS
+        real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **(self.subgoal_graph or {}))
+        counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
+        self.explorer = FrontierSubgoals(
+            graph, float(settings["goal_heuristic"]), float(settings["revisit_cost"]), plan_counts=counts
+        )
+        if self.subgoal_graph is not None:
+            self.subgoals = graph
+        self.logger.record("explore/frontiers", self.explorer.num_frontiers)
+        self.logger.record("explore/graph_nodes", len(graph.nodes))
+        return self.explorer
+
+    def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> GraphSubgoals:
+        """Build the subgoal graph (``subgoal_graph``'s settings, or the defaults) over real transitions and use it.
+
+        :param states: [M, D] real states.
+        :param next_states: [M, D] their real next states.
+        :return: the graph, also ``self.subgoals``.
+        """
+        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **(self.subgoal_graph or {}))
+        return self.subgoals
 
     def _run_online(self, total_timesteps: int, callback: BaseCallback, log_interval: int) -> None:
         env = self.env
@@ -732,6 +797,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 self.logger.record("train/epoch", epoch + 1)
                 self.logger.record("time/time_elapsed", int(time.perf_counter() - start), exclude="tensorboard")
                 self.logger.dump(step=self._n_updates)
+        if self.subgoal_graph is not None:
+            self.build_subgoals(dataset.states, dataset.next_states)
         return self
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:

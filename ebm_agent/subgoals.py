@@ -11,8 +11,10 @@ the goal with the node ``lookahead`` edges along the shortest path from the stat
 the path is shorter). Where no path exists the goal is kept, so the agent plans as before.
 
 It uses only what the agent learned and saw (states, real step sizes, its energy): no wall map, no env internals.
-Any agent whose ``subgoals`` attribute the planning loop reads (:class:`~ebm_agent.base.PlannerAgentBase`) can use it;
-the edges need an energy (``energy_model``), so the EBM agent.
+The edges come from the energy (``edges="energy"``, the EBM agent's ``energy_model``), from the moves the agent made
+(``edges="real"``: a real transition between two neighbouring cells is a move that can be made; any agent, Action FF
+included, which has no energy) or from both. Any agent whose ``subgoals`` attribute the planning loop reads
+(:class:`~ebm_agent.base.PlannerAgentBase`) can use it.
 
 Usage::
 
@@ -31,10 +33,21 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
+from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.probe import transition_energies
 
-__all__ = ["FrontierSubgoals", "GraphSubgoals"]
+__all__ = ["EDGES", "EXPLORE_DEFAULTS", "SUBGOAL_GRAPH_KEYS", "FrontierSubgoals", "GraphSubgoals", "check_long_horizon"]
+
+EDGES: tuple[str, ...] = ("energy", "real", "both")
+"""Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
+
+SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges"})
+"""The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
+
+EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "revisit_cost": 1.0}
+"""The keywords of an agent's ``explore`` and their defaults: transitions between rebuilds of the graph, and the
+weights of :class:`FrontierSubgoals`."""
 
 
 @dataclass
@@ -49,10 +62,10 @@ class GraphSubgoals:
     :param graph: [V, V] sparse costs of the allowed moves u -> v (1 plus the clearance term).
     :param lookahead: edges along the path to the subgoal (about the plan's horizon).
     :param energy_threshold: the energy below which a move is allowed (a quantile of real transitions' energies).
-    :param energy: ``energy(states [K, D], next_states [K, D]) -> [K]`` numpy energies, or None. With it, a subgoal is
-        the farthest path node within ``lookahead`` in sight of the state: the straight segment to it stays in visited
-        cells and the energy allows each move of at most one cell along it (under ``energy_threshold``), so that plans
-        do not cut corners through walls; without it, the node ``lookahead`` edges along.
+    :param energy: ``energy(states [K, D], next_states [K, D]) -> [K]`` numpy energies, or None. A subgoal is the
+        farthest path node within ``lookahead`` in sight of the state: the straight segment to it stays in visited
+        cells and (with an energy) the energy allows each move of at most one cell along it (under
+        ``energy_threshold``), so that plans do not cut corners through walls.
     :param cell: the grid's cell side, in units of ``step``.
     :param patience: with a number, a row of :meth:`subgoals` whose state has not moved a quarter of a real step since
         the previous call that many times in a row (a plan that keeps running into something the graph's segment
@@ -91,11 +104,12 @@ class GraphSubgoals:
         max_nodes: int = 5000,
         seed: int = 0,
         patience: int | None = None,
+        edges: str = "energy",
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
-        :param agent: an agent with ``energy_model`` (E(s [..., D], s' [..., D]) -> [...]), ``goal_spec``, ``device``
-            and ``horizon``.
+        :param agent: an agent with ``goal_spec`` and ``horizon``, and for edges from the energy ``energy_model``
+            (E(s [..., D], s' [..., D]) -> [...]) and ``device``.
         :param states: [M, D] real states.
         :param next_states: [M, D] their real next states.
         :param lookahead: edges to the subgoal (default: the agent's horizon).
@@ -108,8 +122,12 @@ class GraphSubgoals:
         :param seed: seed of that subset and of the transitions the threshold is read from.
         :param patience: calls without moving after which a subgoal is the path's next node (see the class); None:
             never.
+        :param edges: ``"energy"``: neighbouring cells are joined where the energy allows the move between their
+            centres; ``"real"``: where a real transition went from one to the other (no energy needed; the graph then
+            knows only the moves made); ``"both"``: either.
         :return: the graph.
-        :raises ValueError: for empty or mismatched transitions, or a quantile outside (0, 1].
+        :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
+            edges from the energy for an agent without one.
         """
         states, next_states = np.asarray(states, np.float32), np.asarray(next_states, np.float32)  # [M, D] each
         if states.ndim != 2 or states.shape != next_states.shape or len(states) == 0:
@@ -120,6 +138,7 @@ class GraphSubgoals:
             raise ValueError(f"quantile must be in (0, 1], got {quantile!r}.")
         if not 0.0 < cell <= 1.0:
             raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
+        check_edges(edges, agent)
         rng = np.random.default_rng(seed)
         step = np.maximum(np.abs(next_states - states).max(axis=0), 1e-6)  # [D]
         side = cell * step  # [D]
@@ -127,12 +146,17 @@ class GraphSubgoals:
         if len(occupied) > max_nodes:
             occupied = occupied[np.sort(rng.choice(len(occupied), max_nodes, replace=False))]
         nodes = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
-        energy = functools.partial(transition_energies, agent)
-        sample = rng.choice(len(states), min(len(states), 20_000), replace=False)
-        threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
         pairs = cKDTree(occupied).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2] neighbouring cells
         pairs = np.concatenate([pairs, pairs[:, ::-1]])  # both directions: feasibility is directional
-        allowed = pairs[energy(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]  # [E, 2]
+        energy, threshold = None, float("inf")
+        allowed = np.zeros((0, 2), dtype=np.int64)  # [E, 2]
+        if edges in ("energy", "both"):
+            energy = functools.partial(transition_energies, agent)
+            sample = rng.choice(len(states), min(len(states), 20_000), replace=False)
+            threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
+            allowed = pairs[energy(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]
+        if edges in ("real", "both"):
+            allowed = np.unique(np.concatenate([allowed, _real_moves(occupied, states, next_states, side)]), axis=0)
         # An edge costs one move, plus ``clearance`` for entering a node that few allowed moves leave (one beside a
         # wall, or at the edge of what was visited): paths keep to the open, where the plans' moves are reliable.
         degree = np.bincount(allowed[:, 0], minlength=len(nodes))  # [V]
@@ -166,7 +190,7 @@ class GraphSubgoals:
             path = [node]
             while len(path) <= self.lookahead and path[-1] != target:
                 path.append(int(toward[path[-1]]))
-            chosen = self._in_sight(state, path) if self.energy is not None else path[-1]
+            chosen = self._in_sight(state, path)
             if self._stalled(i, state) and len(path) > 1:
                 chosen = path[1]  # stuck: the next node, one move away, instead of the farthest in sight
             if chosen != target:
@@ -183,13 +207,16 @@ class GraphSubgoals:
         return stalls >= self.patience
 
     def _in_sight(self, state: np.ndarray, path: list[int]) -> int:
-        """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` the energy allows."""
+        """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` stays in
+        visited cells and, with an energy, the energy allows."""
         for node in reversed(path[1:]):
             segment = self.nodes[node] - state  # [D]
             moves = max(int(np.ceil(np.abs(segment / (self.cell * self.step)).max())), 1)
             points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
             if not all(cell in self._cells for cell in map(tuple, self._cell_of(points[1:]).tolist())):
                 continue  # the segment leaves the visited cells (into a wall, or where nothing was seen)
+            if self.energy is None:
+                return node
             if np.all(self.energy(points[:-2:2].astype(np.float32), points[2::2].astype(np.float32)) <= self.energy_threshold):
                 return node
         return path[1] if len(path) > 1 else path[0]
@@ -359,7 +386,7 @@ class FrontierSubgoals:
         while path[-1] != start:
             path.append(int(predecessors[path[-1]]))
         path = path[::-1][: graph.lookahead + 1]  # [start, ..., at most lookahead edges along]
-        chosen = graph._in_sight(state, path) if graph.energy is not None and len(path) > 1 else path[-1]
+        chosen = graph._in_sight(state, path) if len(path) > 1 else path[-1]
         if chosen != target:
             return graph.nodes[chosen, dims]
         # The frontier is in sight: push past it into the unvisited cell for the rest of the plan's moves, so that
@@ -368,3 +395,90 @@ class FrontierSubgoals:
         cell = self._frontier_cells[best]  # the push counts against F wherever the agent is (it may be past F)
         self.plan_counts[cell] = self.plan_counts.get(cell, 0) + 1
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
+
+
+def _real_moves(occupied: np.ndarray, states: np.ndarray, next_states: np.ndarray, side: np.ndarray) -> np.ndarray:
+    """The moves between neighbouring nodes that real transitions made.
+
+    :param occupied: [V, D] the nodes' integer cell indices.
+    :param states: [M, D] real states.
+    :param next_states: [M, D] their real next states.
+    :param side: [D] the cells' side.
+    :return: [E, 2] (from, to) node indices of the distinct moves from a cell to a neighbouring one (a transition
+        that stayed in its cell, jumped further, or left the nodes, e.g. those a ``max_nodes`` cap dropped, gives none).
+    """
+    index = {cell: i for i, cell in enumerate(map(tuple, occupied.tolist()))}
+    start = np.floor(states / side).astype(np.int64)  # [M, D]
+    end = np.floor(next_states / side).astype(np.int64)  # [M, D]
+    hop = np.abs(end - start).max(axis=1) == 1  # [M] to a neighbouring cell
+    moves = np.unique(np.concatenate([start[hop], end[hop]], axis=1), axis=0)  # [K, 2 D] distinct cell pairs
+    dim = occupied.shape[1]
+    found = [
+        (index[a], index[b])
+        for a, b in ((tuple(row[:dim]), tuple(row[dim:])) for row in moves.tolist())
+        if a in index and b in index
+    ]
+    return np.asarray(found, dtype=np.int64).reshape(-1, 2)
+
+
+def check_edges(edges: Any, agent: Any = None) -> None:
+    """Refuse an unknown ``edges``, or edges from the energy for an agent that has none.
+
+    :param edges: the ``edges`` argument of :meth:`GraphSubgoals.from_transitions`.
+    :param agent: the agent the graph is for (None: check the value only).
+    :raises ValueError: naming the problem and the fix.
+    """
+    if edges not in EDGES:
+        raise ValueError(f"edges must be one of {EDGES}, got {edges!r}.")
+    has_energy = hasattr(type(agent), "energy_model") or hasattr(agent, "energy_model")  # the class's, before setup
+    if agent is not None and edges != "real" and not has_energy:
+        raise ValueError(
+            f"edges={edges!r} needs a learned energy, and {type(agent).__name__} has none; use edges='real' (a graph of "
+            "the moves the agent made)."
+        )
+
+
+def check_long_horizon(subgoal_graph: Any, explore: Any, agent: Any = None) -> None:
+    """Refuse a ``subgoal_graph`` or ``explore`` agent argument that is not None or a dict of known keywords.
+
+    :param subgoal_graph: keywords of :meth:`GraphSubgoals.from_transitions`, or None.
+    :param explore: keywords of :data:`EXPLORE_DEFAULTS`, or None.
+    :param agent: the agent (checks that it has an energy where the graph's edges need one).
+    :raises ValueError: naming the unknown keywords or the bad value.
+    """
+    if subgoal_graph is not None:
+        unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
+        if not isinstance(subgoal_graph, dict) or unknown:
+            raise ValueError(
+                f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
+                f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
+            )
+    if subgoal_graph is not None or explore is not None:
+        check_edges((subgoal_graph or {}).get("edges", "energy"), agent)
+    if explore is not None:
+        unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
+        if not isinstance(explore, dict) or unknown:
+            raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
+        every = explore.get("every", EXPLORE_DEFAULTS["every"])
+        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
+            raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
+        for name in ("goal_heuristic", "revisit_cost"):
+            weight = explore.get(name, EXPLORE_DEFAULTS[name])
+            if isinstance(weight, bool) or not isinstance(weight, int | float) or not (np.isfinite(weight) and weight >= 0):
+                raise ValueError(f"explore[{name!r}] must be a finite number >= 0 (a cost weight), got {weight!r}.")
+
+
+class FrontierRebuild(BaseCallback):
+    """Rebuild an exploring agent's frontier (:meth:`~ebm_agent.base.PlannerAgentBase.build_frontier`) every
+    ``every`` transitions of ``learn``."""
+
+    def __init__(self, every: int) -> None:
+        super().__init__()
+        self.every = every
+        self._next = 0
+
+    def _on_step(self) -> bool:
+        if self.num_timesteps >= self._next:
+            if self.model.build_frontier() is not None:  # type: ignore[attr-defined]
+                self._next = self.num_timesteps + self.every
+        return True

@@ -50,7 +50,7 @@ RESUME_FOLDER = "resume"
 STATE_FILE = "state.json"
 """The file in ``RESUME_FOLDER`` that names the checkpoint's two files; written last."""
 
-RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", "error.txt")
+RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", "graph_transitions.npz", "error.txt")
 """Files a run writes; a rerun removes stale ones first (an old ``evaluations.npz`` would join the new curve)."""
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import gymnasium as gym
+import numpy as np
 import yaml
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
 from stable_baselines3.common.env_util import make_vec_env
@@ -202,6 +203,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
+        save_graph_transitions(model, run_dir / GRAPH_TRANSITIONS)
         quality = model_quality_of(model, job)
         wall_time = time.perf_counter() - start + earlier
         metrics = {
@@ -254,6 +256,33 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         training_env = model.get_env()
         if training_env is not None:
             training_env.close()
+
+
+GRAPH_TRANSITIONS = "graph_transitions.npz"
+"""The real transitions an agent with graph subgoals built its final graph from, kept beside its model."""
+
+
+def save_graph_transitions(model: Any, path: Path) -> bool:
+    """Keep the replay buffer of an online agent with graph subgoals (``subgoal_graph``), which the model file leaves
+    out, so that its final graph can be rebuilt and a failed evaluation looked into::
+
+        data = np.load(path); agent.build_subgoals(data["states"], data["next_states"])
+
+    Written atomically (a temporary file, then renamed).
+
+    :param model: the trained agent.
+    :param path: the ``.npz`` file to write.
+    :return: whether a file was written (not for agents without ``subgoal_graph`` or with an empty buffer).
+    """
+    buffer = getattr(model, "pos_buffer", None)
+    if getattr(model, "subgoal_graph", None) is None or buffer is None or len(buffer) == 0:
+        return False
+    real = buffer.get(np.arange(len(buffer)))
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "wb") as file:
+        np.savez_compressed(file, states=real.states, next_states=real.next_states, actions=real.actions)
+    os.replace(partial, path)
+    return True
 
 
 PROBE_MOVES = 2000
@@ -392,6 +421,7 @@ def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, 
 
 
 __all__ = [
+    "GRAPH_TRANSITIONS",
     "PROBE_MOVES",
     "PROBE_TRANSITIONS",
     "RUN_LOCK",
@@ -400,4 +430,5 @@ __all__ = [
     "model_quality_of",
     "run_in_progress",
     "run_job",
+    "save_graph_transitions",
 ]
