@@ -243,3 +243,60 @@ def test_while_exploring_the_evaluations_follow_the_graph_and_the_training_plans
     counts = dict(agent.explorer.plan_counts)
     agent._plan_goals(state, goal, training=True)
     assert sum(agent.explorer.plan_counts.values()) > sum(counts.values())  # the frontier aimed this plan
+
+
+def _energy_free_agent() -> SimpleNamespace:
+    """An agent with a goal layout and a horizon but no energy (as Action FF)."""
+    return SimpleNamespace(horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1]))
+
+
+def test_real_edges_are_the_moves_made_and_need_no_energy():
+    states, following = _walk()
+    graph = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    assert graph.energy is None and graph.num_edges > 0
+    path = graph.path(np.array([-0.8, -0.8], np.float32), np.array([0.8, -0.8], np.float32))
+    assert len(path) > 0 and path[:, 1].max() > 0.5  # round the wall that no real move crossed
+    crossings = np.sign(path[:-1, 0]) != np.sign(path[1:, 0])
+    assert np.all(np.maximum(path[:-1, 1], path[1:, 1])[crossings] >= 0.5)
+    # Every edge joins two neighbouring cells that some real transition went between, in that direction.
+    side = graph.cell * graph.step
+    made = {
+        (tuple(a), tuple(b))
+        for a, b in zip(np.floor(states / side).astype(int).tolist(), np.floor(following / side).astype(int).tolist())
+    }
+    rows, cols = graph.graph.nonzero()
+    cells = graph._cell_of(graph.nodes)
+    assert all((tuple(cells[u].tolist()), tuple(cells[v].tolist())) in made for u, v in zip(rows, cols))
+
+
+def test_edges_from_both_join_the_energys_and_the_real_moves_and_bad_edges_are_refused():
+    agent = SimpleNamespace(
+        energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
+    )
+    states, following = _walk(steps=5000)
+    energy = GraphSubgoals.from_transitions(agent, states, following)
+    real = GraphSubgoals.from_transitions(agent, states, following, edges="real")
+    both = GraphSubgoals.from_transitions(agent, states, following, edges="both")
+    union = set(zip(*energy.graph.nonzero())) | set(zip(*real.graph.nonzero()))
+    assert set(zip(*both.graph.nonzero())) == union and real.num_edges > 0
+    assert both.energy is not None and np.isfinite(both.energy_threshold)
+    with pytest.raises(ValueError, match="edges must be one of"):
+        GraphSubgoals.from_transitions(agent, states, following, edges="walls")
+    with pytest.raises(ValueError, match="needs a learned energy"):
+        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="both")
+
+
+def test_action_ff_explores_with_a_graph_of_its_real_moves_and_refuses_energy_edges():
+    from baselines.action_ff import ActionFFAgent
+
+    env = gym.make("ebm/Maze-v0")
+    graph, explore = {"edges": "real"}, {"every": 100}
+    planner = {"iterations": 2}
+    agent = ActionFFAgent("MultiInputPolicy", env, seed=0, subgoal_graph=graph, explore=explore, planner_config=planner)
+    agent.learn(300)
+    assert isinstance(agent.subgoals, GraphSubgoals) and agent.subgoals.energy is None and agent.explorer is None
+    assert len(agent.subgoals.nodes) > 1
+    with pytest.raises(ValueError, match="edges='real'"):
+        ActionFFAgent("MultiInputPolicy", env, subgoal_graph={})
+    with pytest.raises(ValueError, match="edges='real'"):
+        ActionFFAgent("MultiInputPolicy", env, explore={})
