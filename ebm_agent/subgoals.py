@@ -37,12 +37,25 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.probe import transition_energies
 
-__all__ = ["EDGES", "EXPLORE_DEFAULTS", "SUBGOAL_GRAPH_KEYS", "FrontierSubgoals", "GraphSubgoals", "check_long_horizon"]
+__all__ = [
+    "EDGES",
+    "EXPLORE_DEFAULTS",
+    "SUBGOAL_GRAPH_KEYS",
+    "UNSTICK",
+    "FrontierSubgoals",
+    "GraphSubgoals",
+    "check_long_horizon",
+]
+
+UNSTICK: tuple[str, ...] = ("next_node", "real_move")
+"""What a stalled plan aims at (``unstick=``): the path's next node, or the end of a real move made nearby."""
 
 EDGES: tuple[str, ...] = ("energy", "real", "both")
 """Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
 
-SUBGOAL_GRAPH_KEYS = frozenset({"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges"})
+SUBGOAL_GRAPH_KEYS = frozenset(
+    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick"}
+)
 """The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
 
 EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "revisit_cost": 1.0}
@@ -69,8 +82,15 @@ class GraphSubgoals:
     :param cell: the grid's cell side, in units of ``step``.
     :param patience: with a number, a row of :meth:`subgoals` whose state has not moved a quarter of a real step since
         the previous call that many times in a row (a plan that keeps running into something the graph's segment
-        test let through, such as a wall's corner) aims at the next node of its path instead of the farthest in
-        sight; None (the default): never.
+        test let through, such as a wall's corner) aims as ``unstick`` says; None (the default): never.
+    :param unstick: where a stalled row aims: ``"next_node"`` (the next node of its path) or ``"real_move"``: the state
+        plus the move of a real transition that started within half a real step of it and ended in a cell closer to
+        the goal along the graph (the nearest such start first, the next nearest at each further stalled call; the
+        path's next node where none did). A node's centre one move away can lie across a wall's corner from the
+        state, where a move from a nearby visited state did get through: a move the agent made is one it can make
+        again.
+    :param move_starts: [M, D] the real transitions' states (for ``unstick="real_move"``), or None.
+    :param move_ends: [M, D] their next states, or None.
     """
 
     nodes: np.ndarray
@@ -82,7 +102,12 @@ class GraphSubgoals:
     energy: Any = None
     cell: float = 0.75
     patience: int | None = None
+    unstick: str = "next_node"
+    move_starts: np.ndarray | None = field(default=None, repr=False)
+    move_ends: np.ndarray | None = field(default=None, repr=False)
     _tree: cKDTree = field(init=False, repr=False)
+    _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
+    _node_of_cell: dict[tuple[int, ...], int] = field(default_factory=dict, init=False, repr=False)
     _cells: set[tuple[int, ...]] = field(init=False, repr=False)
     _paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False)
     _last: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict, init=False, repr=False)  # row -> (state, stalls)
@@ -90,6 +115,13 @@ class GraphSubgoals:
     def __post_init__(self) -> None:
         self._tree = cKDTree(self.nodes / self.step)  # Chebyshev queries in units of one step
         self._cells = set(map(tuple, self._cell_of(self.nodes).tolist()))  # the visited cells
+        if self.unstick not in UNSTICK:
+            raise ValueError(f"unstick must be one of {UNSTICK}, got {self.unstick!r}.")
+        if self.unstick == "real_move":
+            if self.move_starts is None or self.move_ends is None or len(self.move_starts) == 0:
+                raise ValueError("unstick='real_move' needs the real transitions (move_starts, move_ends).")
+            self._move_tree = cKDTree(self.move_starts / self.step)
+            self._node_of_cell = {cell: i for i, cell in enumerate(map(tuple, self._cell_of(self.nodes).tolist()))}
 
     @classmethod
     def from_transitions(
@@ -105,6 +137,7 @@ class GraphSubgoals:
         seed: int = 0,
         patience: int | None = None,
         edges: str = "energy",
+        unstick: str = "next_node",
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -125,6 +158,8 @@ class GraphSubgoals:
         :param edges: ``"energy"``: neighbouring cells are joined where the energy allows the move between their
             centres; ``"real"``: where a real transition went from one to the other (no energy needed; the graph then
             knows only the moves made); ``"both"``: either.
+        :param unstick: where a stalled plan aims (see the class): ``"next_node"`` or ``"real_move"`` (the graph then
+            keeps the transitions).
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
             edges from the energy for an agent without one.
@@ -166,7 +201,20 @@ class GraphSubgoals:
         horizon = int(agent.horizon) if lookahead is None else int(lookahead)
         if patience is not None and (isinstance(patience, bool) or not isinstance(patience, int) or patience < 1):
             raise ValueError(f"patience must be None or a positive int, got {patience!r}.")
-        return cls(nodes, np.asarray(spec.goal_indices), step, graph, max(horizon, 1), threshold, energy, cell, patience)
+        moves = (states, next_states) if unstick == "real_move" else (None, None)
+        return cls(
+            nodes,
+            np.asarray(spec.goal_indices),
+            step,
+            graph,
+            max(horizon, 1),
+            threshold,
+            energy,
+            cell,
+            patience,
+            unstick,
+            *moves,
+        )
 
     @property
     def num_edges(self) -> int:
@@ -192,6 +240,10 @@ class GraphSubgoals:
                 path.append(int(toward[path[-1]]))
             chosen = self._in_sight(state, path)
             if self._stalled(i, state) and len(path) > 1:
+                move = self._real_move(i, state, node, distance) if self.unstick == "real_move" else None
+                if move is not None:
+                    out[i] = move[self.goal_indices]  # stuck: where a real move from nearby went, along the path
+                    continue
                 chosen = path[1]  # stuck: the next node, one move away, instead of the farthest in sight
             if chosen != target:
                 out[i] = self.nodes[chosen, self.goal_indices]
@@ -205,6 +257,26 @@ class GraphSubgoals:
         stalls = last[1] + 1 if last is not None and np.all(np.abs(state - last[0]) < 0.25 * self.step) else 0
         self._last[row] = (state.copy(), stalls)
         return stalls >= self.patience
+
+    def _real_move(self, row: int, state: np.ndarray, node: int, distance: np.ndarray) -> np.ndarray | None:
+        """A real move from within half a step of ``state`` that ended closer to the target along the graph than
+        ``node``, made again from ``state`` (its displacement added to the state, [D]): the one that started nearest
+        at the first stalled call, the next nearest at the next (a move across a wall's corner from a state on its
+        other side fails from here). None where no such move was made."""
+        assert self._move_tree is not None and self.move_starts is not None and self.move_ends is not None
+        near = np.asarray(self._move_tree.query_ball_point(state / self.step, r=0.5, p=np.inf), dtype=np.int64)  # [K]
+        if len(near) == 0:
+            return None
+        cells = map(tuple, self._cell_of(self.move_ends[near]).tolist())
+        cost = np.array([distance[self._node_of_cell[c]] if c in self._node_of_cell else np.inf for c in cells])  # [K]
+        better = near[cost < distance[node]]  # [B] moves that got closer
+        if len(better) == 0:
+            return None
+        gaps = np.abs(self.move_starts[better] - state) / self.step  # [B, D]
+        order = better[np.argsort(gaps.max(axis=1), kind="stable")]  # nearest start first
+        tries = self._last[row][1] - (self.patience or 0)  # stalled calls so far beyond the patience
+        move = order[tries % len(order)]
+        return state + (self.move_ends[move] - self.move_starts[move])
 
     def _in_sight(self, state: np.ndarray, path: list[int]) -> int:
         """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` stays in

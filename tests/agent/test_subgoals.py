@@ -300,3 +300,40 @@ def test_action_ff_explores_with_a_graph_of_its_real_moves_and_refuses_energy_ed
         ActionFFAgent("MultiInputPolicy", env, subgoal_graph={})
     with pytest.raises(ValueError, match="edges='real'"):
         ActionFFAgent("MultiInputPolicy", env, explore={})
+
+
+def test_a_stalled_plan_repeats_a_real_move_from_nearby_that_got_closer_trying_the_next_one_each_time():
+    states, following = _walk()
+    graph = GraphSubgoals.from_transitions(
+        _energy_free_agent(), states, following, edges="real", patience=2, unstick="real_move"
+    )
+    here, goal = np.array([[-0.9, -0.4]], np.float32), np.array([[-0.2, -0.8]], np.float32)
+    target = graph._goal_node(goal[0])
+    distance, _ = graph._paths_to(target)
+    node = graph._start_node(here[0], distance)
+    plain = graph.subgoals(here, goal)[0]
+    assert node is not None and not np.allclose(plain, goal[0])  # a path, longer than the lookahead
+    graph.subgoals(here, goal)  # one stalled call: patience 2 not reached yet
+    moves = []
+    for _ in range(3):  # stalled: each call repeats another real move
+        out = graph.subgoals(here, goal)[0]
+        assert not np.allclose(out, plain)
+        moves.append(out - here[0])
+    for move in moves:
+        made = np.flatnonzero(np.all(np.isclose(following - states, move, atol=1e-6), axis=1))
+        assert len(made) > 0  # a displacement a real transition made ...
+        starts_near = np.abs(states[made] - here[0]).max(axis=1) <= 0.5 * graph.step.max() + 1e-6
+        assert starts_near.any()  # ... from within half a step of here ...
+        cells = graph._cell_of(following[made[starts_near]])
+        costs = [distance[graph._node_of_cell[tuple(c)]] for c in cells.tolist() if tuple(c) in graph._node_of_cell]
+        assert min(costs) < distance[node]  # ... that ended closer to the goal along the graph
+    assert len({tuple(np.round(m, 6)) for m in moves}) == 3  # the next one each time
+
+
+def test_unstick_is_checked():
+    states, following = _walk(steps=2000)
+    with pytest.raises(ValueError, match="unstick must be one of"):
+        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", unstick="jump")
+    graph = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    with pytest.raises(ValueError, match="needs the real transitions"):
+        GraphSubgoals(graph.nodes, graph.goal_indices, graph.step, graph.graph, 10, np.inf, unstick="real_move")
