@@ -54,7 +54,7 @@ EDGES: tuple[str, ...] = ("energy", "real", "both")
 """Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
 
 SUBGOAL_GRAPH_KEYS = frozenset(
-    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick"}
+    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick", "real_hops"}
 )
 """The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
 
@@ -138,6 +138,7 @@ class GraphSubgoals:
         patience: int | None = None,
         edges: str = "energy",
         unstick: str = "next_node",
+        real_hops: int = 1,
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -160,6 +161,10 @@ class GraphSubgoals:
             knows only the moves made); ``"both"``: either.
         :param unstick: where a stalled plan aims (see the class): ``"next_node"`` or ``"real_move"`` (the graph then
             keeps the transitions).
+        :param real_hops: the real-move edges join cells at most this many cells apart (per dim): 1, neighbouring
+            cells only; 2 also keeps the moves that crossed a cell (a real step is up to 1/``cell`` cells long, so
+            about a third of full steps at the default ``cell``), which a graph without energy edges needs to hold
+            together. An edge costs the cells it spans.
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
             edges from the energy for an agent without one.
@@ -174,6 +179,8 @@ class GraphSubgoals:
         if not 0.0 < cell <= 1.0:
             raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
         check_edges(edges, agent)
+        if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
+            raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
         rng = np.random.default_rng(seed)
         step = np.maximum(np.abs(next_states - states).max(axis=0), 1e-6)  # [D]
         side = cell * step  # [D]
@@ -191,11 +198,13 @@ class GraphSubgoals:
             threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
             allowed = pairs[energy(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]
         if edges in ("real", "both"):
-            allowed = np.unique(np.concatenate([allowed, _real_moves(occupied, states, next_states, side)]), axis=0)
+            real = _real_moves(occupied, states, next_states, side, real_hops)
+            allowed = np.unique(np.concatenate([allowed, real]), axis=0)
         # An edge costs one move, plus ``clearance`` for entering a node that few allowed moves leave (one beside a
         # wall, or at the edge of what was visited): paths keep to the open, where the plans' moves are reliable.
         degree = np.bincount(allowed[:, 0], minlength=len(nodes))  # [V]
-        cost = 1.0 + clearance * (1.0 - degree[allowed[:, 1]] / max(int(degree.max(initial=0)), 1))  # [E]
+        span = np.abs(occupied[allowed[:, 0]] - occupied[allowed[:, 1]]).max(axis=1, initial=1)  # [E] cells per edge
+        cost = span + clearance * (1.0 - degree[allowed[:, 1]] / max(int(degree.max(initial=0)), 1))  # [E]
         graph = csr_matrix((cost, (allowed[:, 0], allowed[:, 1])), shape=(len(nodes), len(nodes)))
         spec = agent.goal_spec
         horizon = int(agent.horizon) if lookahead is None else int(lookahead)
@@ -469,20 +478,25 @@ class FrontierSubgoals:
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
 
 
-def _real_moves(occupied: np.ndarray, states: np.ndarray, next_states: np.ndarray, side: np.ndarray) -> np.ndarray:
-    """The moves between neighbouring nodes that real transitions made.
+def _real_moves(
+    occupied: np.ndarray, states: np.ndarray, next_states: np.ndarray, side: np.ndarray, hops: int = 1
+) -> np.ndarray:
+    """The moves between nodes at most ``hops`` cells apart that real transitions made.
 
     :param occupied: [V, D] the nodes' integer cell indices.
     :param states: [M, D] real states.
     :param next_states: [M, D] their real next states.
     :param side: [D] the cells' side.
-    :return: [E, 2] (from, to) node indices of the distinct moves from a cell to a neighbouring one (a transition
-        that stayed in its cell, jumped further, or left the nodes, e.g. those a ``max_nodes`` cap dropped, gives none).
+    :param hops: the most cells (per dim) between the two ends' cells.
+    :return: [E, 2] (from, to) node indices of the distinct moves from a cell to another at most ``hops`` away (a
+        transition that stayed in its cell, jumped further, or left the nodes, e.g. those a ``max_nodes`` cap dropped,
+        gives none).
     """
     index = {cell: i for i, cell in enumerate(map(tuple, occupied.tolist()))}
     start = np.floor(states / side).astype(np.int64)  # [M, D]
     end = np.floor(next_states / side).astype(np.int64)  # [M, D]
-    hop = np.abs(end - start).max(axis=1) == 1  # [M] to a neighbouring cell
+    span = np.abs(end - start).max(axis=1)  # [M]
+    hop = (span >= 1) & (span <= hops)  # [M] to another cell, near enough
     moves = np.unique(np.concatenate([start[hop], end[hop]], axis=1), axis=0)  # [K, 2 D] distinct cell pairs
     dim = occupied.shape[1]
     found = [

@@ -337,3 +337,16 @@ def test_unstick_is_checked():
     graph = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
     with pytest.raises(ValueError, match="needs the real transitions"):
         GraphSubgoals(graph.nodes, graph.goal_indices, graph.step, graph.graph, 10, np.inf, unstick="real_move")
+
+
+def test_real_hops_keeps_the_real_moves_that_crossed_a_cell_at_the_cost_of_the_cells_they_span():
+    states, following = _walk(steps=5000)
+    one = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", clearance=0.0)
+    two = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", clearance=0.0, real_hops=2)
+    assert set(zip(*one.graph.nonzero())) < set(zip(*two.graph.nonzero()))
+    cells = two._cell_of(two.nodes)
+    rows, cols = two.graph.nonzero()
+    spans = np.abs(cells[rows] - cells[cols]).max(axis=1)
+    assert set(spans.tolist()) == {1, 2} and np.allclose(np.asarray(two.graph[rows, cols]).ravel(), spans)
+    with pytest.raises(ValueError, match="real_hops"):
+        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", real_hops=0)
