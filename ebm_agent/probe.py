@@ -489,6 +489,30 @@ def _check_positive_int(value: Any, name: str) -> None:
         raise ValueError(f"{name} must be a positive int, got {value!r}.")
 
 
+def _draw_maps(agent: Any, env: gym.Env, held_out: TransitionDataset, path: str) -> None:
+    """Write :func:`~ebm_agent.visualize.energy_maps_figure` of the agent's energy over the env's 2-D state box.
+
+    :param agent: the agent.
+    :param env: its env (``state_low`` / ``state_high`` give the box).
+    :param held_out: real transitions (their largest per-dim change is the one-step move probed).
+    :param path: the PNG to write.
+    :raises ValueError: for an env whose states are not 2-D or have no finite box.
+    """
+    from ebm_agent.visualize import energy_maps_figure  # matplotlib only for the map
+
+    base = env.unwrapped
+    low, high = getattr(base, "state_low", None), getattr(base, "state_high", None)
+    if low is None or high is None or np.asarray(low).shape != (2,) or not np.all(np.isfinite([low, high])):
+        raise ValueError("--map draws 2-D state spaces with a finite state_low/state_high box (the particle, the maze).")
+    step = np.abs(held_out.next_states - held_out.states).max(axis=0)  # [2]
+    figure = energy_maps_figure(agent.energy_model, np.asarray(low), np.asarray(high), step)
+    figure.savefig(path, dpi=100)
+    import matplotlib.pyplot as plt
+
+    plt.close(figure)
+    print(f"energy maps written to {path}")
+
+
 def main(argv: list[str] | None = None) -> tuple[FeasibilityResult | None, NextStateRankResult]:
     """Probe a saved :class:`~ebm_agent.agent.EBMPlannerAgent`: ``python -m ebm_agent.probe model.zip ENV_ID``.
 
@@ -503,6 +527,12 @@ def main(argv: list[str] | None = None) -> tuple[FeasibilityResult | None, NextS
     parser.add_argument("--candidates", type=int, default=64, help="perturbed candidates per transition")
     parser.add_argument("--scale", type=float, default=1.0, help="candidate noise, in std(s' - s)")
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument(
+        "--map",
+        metavar="PNG",
+        help="also draw the energy over a 2-D state space to this file: a small move centred at each state, and the "
+        "highest energy of a one-step move from each state (the walls' edges, where moves are refused)",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     from ebm_agent.agent import EBMPlannerAgent  # only the CLI needs the class
@@ -516,6 +546,8 @@ def main(argv: list[str] | None = None) -> tuple[FeasibilityResult | None, NextS
             f"({feasibility.num_infeasible} infeasible, {feasibility.num_feasible} feasible)"
         )
     held_out = collect_random_transitions(env, args.transitions, seed=args.seed + 10_000)
+    if args.map is not None:
+        _draw_maps(agent, env, held_out, args.map)
     rank = next_state_rank(agent, held_out, args.candidates, args.scale, seed=args.seed)
     print(
         f"next-state top-1 {rank.top1:.4f} (chance {rank.chance:.4f}), mean rank {rank.mean_rank:.4f} "

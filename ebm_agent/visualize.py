@@ -41,6 +41,64 @@ def energy_map(
     return values.cpu().numpy()
 
 
+def move_energy_map(
+    energy: nn.Module,
+    low: np.ndarray,
+    high: np.ndarray,
+    step: np.ndarray,
+    resolution: int = 64,
+    directions: int = 8,
+) -> np.ndarray:
+    """The highest energy of a one-step move from each cell of a grid over a 2-D state space, over ``directions``
+    directions: where some move from a state is one the env refuses (beside a wall), an energy that learned the walls
+    is high; in the open, every move is possible and all are low. Unlike :func:`energy_map` (a move centred at the
+    state), it shows the walls' edges, where feasibility changes.
+
+    :param energy: E(states [..., 2], next_states [..., 2]) -> [...].
+    :param low: [2] lower corner.
+    :param high: [2] upper corner.
+    :param step: [2] the size of a move along each axis (e.g. the largest real one-step change).
+    :param resolution: cells per axis.
+    :param directions: moves probed, evenly spaced in angle (8: the axes and the diagonals).
+    :return: [resolution, resolution] energies, row index = y (origin at ``low``).
+    """
+    xs = np.linspace(low[0], high[0], resolution, dtype=np.float32)
+    ys = np.linspace(low[1], high[1], resolution, dtype=np.float32)
+    grid = np.stack(np.meshgrid(xs, ys), axis=-1)  # [R, R, 2], [y, x]
+    angles = 2 * np.pi * np.arange(directions) / directions  # [K]
+    moves = (np.stack([np.cos(angles), np.sin(angles)], axis=-1) * np.asarray(step, np.float32)).astype(np.float32)  # [K, 2]
+    starts = np.broadcast_to(grid[None], (directions, *grid.shape))  # [K, R, R, 2]
+    ends = starts + moves[:, None, None, :]  # [K, R, R, 2]
+    device = next(energy.parameters()).device
+    with torch.no_grad():
+        values = energy(torch.as_tensor(np.ascontiguousarray(starts), device=device), torch.as_tensor(ends, device=device))
+    return values.max(dim=0).values.cpu().numpy()  # [R, R]
+
+
+def energy_maps_figure(energy: nn.Module, low: np.ndarray, high: np.ndarray, step: np.ndarray, resolution: int = 64) -> Figure:
+    """Two panels of a 2-D energy: :func:`energy_map` (a small move centred at each state, the paper's Fig. 9) and
+    :func:`move_energy_map` (the highest energy of a one-step move from each state: the walls' edges).
+
+    :param energy: the energy model.
+    :param low: [2] lower corner of the state space.
+    :param high: [2] upper corner.
+    :param step: [2] the size of a one-step move along each axis.
+    :param resolution: cells per axis.
+    :return: the matplotlib figure (close it after use).
+    """
+    figure, axes = plt.subplots(1, 2, figsize=(8, 4))
+    panels = [
+        (energy_map(energy, low, high, resolution), "E(c - m/2, c + m/2), m = (0.02, 0.02)"),
+        (move_energy_map(energy, low, high, step, resolution), "max over 8 directions of E(s, s + one step)"),
+    ]
+    for axis, (values, title) in zip(axes, panels):
+        image = axis.imshow(values, origin="lower", extent=(low[0], high[0], low[1], high[1]), cmap="viridis")
+        figure.colorbar(image, ax=axis, fraction=0.046)
+        axis.set_title(title, fontsize=8)
+    figure.tight_layout()
+    return figure
+
+
 def plan_figure(
     energy: nn.Module,
     low: np.ndarray,

@@ -127,3 +127,44 @@ def test_callback_logs_the_probe_keys_during_learn_and_changes_nothing():
     assert callback.num_probes == 2 and callback.last_feasibility is not None
     for probed_weight, plain_weight in zip(probed.energy_model.parameters(), plain.energy_model.parameters(), strict=True):
         assert torch.equal(probed_weight, plain_weight)
+
+
+class _WallAtZero(torch.nn.Module):
+    """E = 1 for a move that crosses x = 0, else 0 (a stand-in energy that knows one wall)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.unused = torch.nn.Parameter(torch.zeros(()))  # a parameter, for the device
+
+    def forward(self, states: torch.Tensor, next_states: torch.Tensor) -> torch.Tensor:
+        return (torch.sign(states[..., 0]) != torch.sign(next_states[..., 0])).float()  # [...]
+
+
+def test_the_move_energy_map_is_high_beside_a_wall_the_energy_knows_and_low_in_the_open():
+    from ebm_agent.visualize import energy_maps_figure, move_energy_map
+
+    low, high, step = np.array([-1.0, -1.0]), np.array([1.0, 1.0]), np.array([0.05, 0.05])
+    values = move_energy_map(_WallAtZero(), low, high, step, resolution=41)  # cells 0.05 apart, x = 0 in column 20
+    assert values.shape == (41, 41)
+    assert np.all(values[:, 19:22] == 1.0)  # beside the wall some move crosses it
+    assert np.all(values[:, :18] == 0.0) and np.all(values[:, 23:] == 0.0)  # in the open none does
+    figure = energy_maps_figure(_WallAtZero(), low, high, step, resolution=16)
+    assert len(figure.axes) == 4  # two panels and their colour bars
+    import matplotlib.pyplot as plt
+
+    plt.close(figure)
+
+
+def test_the_probe_cli_draws_the_maps_of_a_saved_agent(tmp_path):
+    from ebm_agent.probe import main
+
+    env = gym.make("ebm/Maze-v0")
+    agent = EBMPlannerAgent("MultiInputPolicy", env, seed=0)
+    agent.save(tmp_path / "model.zip")
+    path = tmp_path / "maps.png"
+    main([str(tmp_path / "model.zip"), "ebm/Maze-v0", "--moves", "50", "--transitions", "50", "--map", str(path)])
+    assert path.stat().st_size > 1000
+    reacher = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Reacher-v0"), seed=0)
+    reacher.save(tmp_path / "reacher.zip")
+    with pytest.raises(ValueError, match="2-D state spaces"):
+        main([str(tmp_path / "reacher.zip"), "ebm/Reacher-v0", "--moves", "10", "--transitions", "10", "--map", str(path)])
