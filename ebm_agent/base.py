@@ -332,6 +332,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         :param planned_actions: [N, T, A] (NaN rows where the model plans states only).
         :param steps: [N] index of the step to take.
         :return: [N, A] actions clipped to the action bounds.
+        :raises ValueError: where an action is not finite (the model overflowed, e.g. on a state far outside the box).
         """
         spec = self.goal_spec
         assert spec is not None
@@ -342,6 +343,11 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             inverse = self._require_inverse_dynamics()
             origin = states if self.online.closed_loop else plans[rows, steps]
             actions[missing] = inverse(origin[missing], plans[rows, steps + 1][missing])
+        if not np.all(np.isfinite(actions)):
+            raise ValueError(
+                f"the actions for states {states[~np.isfinite(actions).all(axis=1)][:3].tolist()} are not finite: the "
+                "model overflowed on them. Are the observations far outside the env's state box (state_low/state_high)?"
+            )
         return np.clip(actions, spec.action_low, spec.action_high).astype(np.float32)
 
     def _explore(self, actions: np.ndarray) -> np.ndarray:
