@@ -21,6 +21,7 @@ install: $(STAMP)
 
 demo: $(STAMP)
 	$(VENV)/bin/ebm-eval --baseline ppo
+	$(VENV)/bin/ebm-eval -c maze_demo --preset fast
 
 test: $(STAMP)
 	$(PY) -m pytest -m "not slow" -n 2 -q
