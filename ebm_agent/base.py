@@ -574,7 +574,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         finally:
             self.explorer = None  # exploring ends with learn
         if self.subgoal_graph is not None and len(self.pos_buffer) > 0:
-            real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+            real = self.pos_buffer.contents()
             self.build_subgoals(real.states, real.next_states)
         return self
 
@@ -588,7 +588,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if len(self.pos_buffer) == 0:
             return None
         settings = self.explore or EXPLORE_DEFAULTS
-        real = self.pos_buffer.get(np.arange(len(self.pos_buffer)))
+        real = self.pos_buffer.contents()
         graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **(self.subgoal_graph or {}))
         counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
         self.explorer = FrontierSubgoals(

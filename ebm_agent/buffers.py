@@ -145,6 +145,13 @@ class TransitionBuffer:
         indices = self._rng.integers(0, self._size, size=int(batch_size))  # [B]
         return self.get(indices)
 
+    def contents(self) -> TransitionBatch:
+        """Every stored transition, in storage order (copies).
+
+        :return: a :class:`TransitionBatch` of ``len(self)`` rows.
+        """
+        return self.get(np.arange(self._size))
+
     def get(self, indices: np.ndarray) -> TransitionBatch:
         """
         Transitions at given storage indices (0 <= index < len(self)).

@@ -516,8 +516,9 @@ def check_edges(edges: Any, agent: Any = None) -> None:
     """
     if edges not in EDGES:
         raise ValueError(f"edges must be one of {EDGES}, got {edges!r}.")
-    has_energy = hasattr(type(agent), "energy_model") or hasattr(agent, "energy_model")  # the class's, before setup
-    if agent is not None and edges != "real" and not has_energy:
+    if agent is None or edges == "real":
+        return
+    if not (hasattr(type(agent), "energy_model") or hasattr(agent, "energy_model")):  # the class's, before setup
         raise ValueError(
             f"edges={edges!r} needs a learned energy, and {type(agent).__name__} has none; use edges='real' (a graph of "
             "the moves the agent made)."

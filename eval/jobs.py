@@ -50,7 +50,10 @@ RESUME_FOLDER = "resume"
 STATE_FILE = "state.json"
 """The file in ``RESUME_FOLDER`` that names the checkpoint's two files; written last."""
 
-RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", "graph_transitions.npz", "error.txt")
+GRAPH_TRANSITIONS = "graph_transitions.npz"
+"""The real transitions an agent with graph subgoals built its final graph from, kept beside its model."""
+
+RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", GRAPH_TRANSITIONS, "error.txt")
 """Files a run writes; a rerun removes stale ones first (an old ``evaluations.npz`` would join the new curve)."""
 
 
@@ -229,6 +232,7 @@ Runner = Callable[[Job], JobResult]
 __all__ = [
     "DATASETS",
     "EVAL_SEED_OFFSET",
+    "GRAPH_TRANSITIONS",
     "MODES",
     "RESUME_FOLDER",
     "RUN_OUTPUTS",

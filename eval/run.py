@@ -29,7 +29,16 @@ from ebm_agent.datasets import collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from ebm_agent.probe import model_quality
 from eval.evaluation import EpisodeScores, EvaluationLine, append_evaluation, evaluate_episodes, last_evaluation
-from eval.jobs import EVAL_SEED_OFFSET, RESUME_FOLDER, RUN_OUTPUTS, Job, JobResult, library_versions, to_plain
+from eval.jobs import (
+    EVAL_SEED_OFFSET,
+    GRAPH_TRANSITIONS,
+    RESUME_FOLDER,
+    RUN_OUTPUTS,
+    Job,
+    JobResult,
+    library_versions,
+    to_plain,
+)
 from eval.pretraining import pretrain
 from eval.provenance import defaults_digest, job_fingerprint, machine_info
 from eval.registry import get_agent
@@ -258,10 +267,6 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             training_env.close()
 
 
-GRAPH_TRANSITIONS = "graph_transitions.npz"
-"""The real transitions an agent with graph subgoals built its final graph from, kept beside its model."""
-
-
 def save_graph_transitions(model: Any, path: Path) -> bool:
     """Keep the replay buffer of an online agent with graph subgoals (``subgoal_graph``), which the model file leaves
     out, so that its final graph can be rebuilt and a failed evaluation looked into::
@@ -277,7 +282,7 @@ def save_graph_transitions(model: Any, path: Path) -> bool:
     buffer = getattr(model, "pos_buffer", None)
     if getattr(model, "subgoal_graph", None) is None or buffer is None or len(buffer) == 0:
         return False
-    real = buffer.get(np.arange(len(buffer)))
+    real = buffer.contents()
     partial = path.with_name(path.name + ".partial")
     with open(partial, "wb") as file:
         np.savez_compressed(file, states=real.states, next_states=real.next_states, actions=real.actions)
@@ -421,7 +426,6 @@ def _log_final_scalars(model: Any, job: Job, timesteps: int, score_mean: float, 
 
 
 __all__ = [
-    "GRAPH_TRANSITIONS",
     "PROBE_MOVES",
     "PROBE_TRANSITIONS",
     "RUN_LOCK",

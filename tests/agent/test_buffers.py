@@ -133,3 +133,15 @@ def test_bad_inputs_raise_clear_errors() -> None:
     buffer.add(np.zeros(2), np.ones(2), np.zeros(1))  # a single unbatched transition is fine
     with pytest.raises(ValueError, match="batch_size"):
         buffer.sample(0)
+
+
+def test_contents_is_every_stored_transition_in_storage_order_and_leaves_the_stream_alone() -> None:
+    buffer = TransitionBuffer(4, 2, 1, seed=0)
+    assert len(buffer.contents().states) == 0
+    states = np.arange(12, dtype=np.float32).reshape(6, 2)  # [6, 2]: the first two are overwritten
+    buffer.add(states, states + 1, np.zeros((6, 1), np.float32))
+    before = buffer.rng.bit_generator.state
+    batch = buffer.contents()
+    assert buffer.rng.bit_generator.state == before
+    np.testing.assert_array_equal(batch.states, buffer.get(np.arange(4)).states)
+    assert sorted(map(tuple, batch.states.tolist())) == sorted(map(tuple, states[2:].tolist()))
