@@ -480,7 +480,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
 
         The plan is carried in ``state``: pass back the returned state on the next call and set ``episode_start``
         when an episode begins. A new plan is made for an env when it has none, its episode starts, its plan ran
-        out, or the real state drifted from the plan by more than ``online.replan_threshold`` (mean over dims).
+        out, or the real state drifted from the plan by more than ``online.replan_threshold`` (mean over dims), or
+        (with ``online.arrival_threshold``) it already reached the plan's final state.
 
         :param observation: a Dict observation, single or batched ([N, ...]).
         :param state: the state returned by the previous call (None: plan from scratch).
@@ -508,6 +509,9 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             idx = np.where(has_plan)[0]
             drift = self._deviation(states[idx], plans[idx, steps[idx]], reduce="mean")
             need[idx[drift > self.online.replan_threshold]] = True
+            if self.online.arrival_threshold is not None:  # arrived where the plan ends: the rest would only hover
+                left = self._deviation(states[idx], plans[idx, horizon], reduce="max")  # [K]
+                need[idx[left <= self.online.arrival_threshold]] = True
         if need.any():
             new_plans, new_actions, _ = self._plan(
                 states[need],

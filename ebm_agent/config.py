@@ -22,6 +22,10 @@ class OnlineConfig:
         this (0.7 in the original for 2-D envs and Reacher; set it per env, e.g. lower for the arm).
     :param replan_threshold: during ``predict``, replan when mean |planned - real| exceeds this (0.55 for 2-D and
         Reacher, 0.3 for the arm in the original's evaluation) or the plan runs out.
+    :param arrival_threshold: during ``predict``, also replan when the real state is within this (max |.| over the
+        model dims) of the plan's final state before the plan runs out: the plan has arrived (typically at a subgoal
+        of :mod:`ebm_agent.subgoals`, which sits closer than the horizon's reach) and its remaining steps would only
+        hover there; a new plan aims at the next subgoal. None (the default): plans run their course.
     :param closed_loop: compute each action from the *real* current state to the next planned state (True) instead
         of from planned state to planned state (the original's training mode).
     :param pos_buffer_size: capacity of the real-transition replay buffer (1e6).
@@ -74,6 +78,7 @@ class OnlineConfig:
 
     deviation_threshold: float = 0.7
     replan_threshold: float = 0.55
+    arrival_threshold: float | None = None
     closed_loop: bool = True
     pos_buffer_size: int = 1_000_000
     neg_buffer_size: int = 10_000
@@ -114,6 +119,8 @@ class OnlineConfig:
         for name in ("deviation_threshold", "replan_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
+        if self.arrival_threshold is not None and not self.arrival_threshold >= 0:
+            raise ValueError(f"OnlineConfig.arrival_threshold must be None (off) or >= 0, got {self.arrival_threshold!r}.")
         if not 0.0 <= self.random_action_prob <= 1.0:
             raise ValueError(f"OnlineConfig.random_action_prob must be in [0, 1], got {self.random_action_prob!r}.")
         if not 0.0 <= self.neg_replay_prob <= 1.0:

@@ -141,6 +141,28 @@ def test_batched_predict_and_state_carry(agent_class):
 
 
 @pytest.mark.parametrize("agent_class", AGENTS)
+def test_arrival_threshold_replans_a_plan_that_has_arrived(agent_class):
+    vec = DummyVecEnv([lambda: gym.make("ebm/Particle-v0")] * 2)
+    obs = vec.reset()
+    keep = np.zeros(2, dtype=bool)
+    for threshold, expected in ((None, [2, 2]), (0.01, [1, 2])):
+        agent = make_agent(agent_class, vec, online={**FAST_KWARGS[agent_class]["online"], "arrival_threshold": threshold})
+        _, (plans, actions, steps) = agent.predict(obs, deterministic=True)
+        plans[0, -1] = obs["observation"][0]  # env 0's plan ends where it already is: nothing left but hovering
+        plans[1, -1] = obs["observation"][1] + 0.5  # env 1's plan still has somewhere to go
+        _, state = agent.predict(obs, state=(plans, actions, steps), episode_start=keep, deterministic=True)
+        assert state[2].tolist() == expected  # a new plan restarts at step 1; a followed one goes on to step 2
+
+
+def test_arrival_threshold_rejects_bad_values():
+    env = gym.make("ebm/Particle-v0")
+    with pytest.raises(ValueError, match="arrival_threshold must be None"):
+        make_agent(EBMPlannerAgent, env, online={"arrival_threshold": -0.1})
+    with pytest.raises(TypeError, match="arrival_threshold"):
+        make_agent(EBMPlannerAgent, env, online={"arrival_threshold": "near"})
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
 def test_evaluate_policy_and_sb3_callbacks(agent_class, tmp_path):
     agent = make_agent(agent_class, gym.make("ebm/Particle-v0"))
     eval_env = Monitor(gym.make("ebm/Particle-v0", start=(0.0, 0.0), goal=(0.5, 0.5)))

@@ -1,0 +1,173 @@
+"""Evaluate a finished run again with its planning settings changed, without training it again.
+
+A planner agent's ``predict`` reads settings that learning never touches (when to replan, where subgoals sit): a
+change of one of them leaves the trained weights as they are. ``python -m eval.reevaluate RUN_DIR --set KEY=VALUE``
+loads the run's ``model.zip``, rebuilds its subgoal graph from ``graph_transitions.npz`` (as ``learn`` does at its
+end), applies the changes and runs the run's evaluation again (its env, seed and episodes; ``--evaluation NAME``: one
+of its extra evaluations, e.g. a maze start/goal pair)::
+
+    python -m eval.reevaluate runs/results/beyond_online_explore_unstick/maze/ebm/seed_0 \\
+        --set online.arrival_threshold=0.025 subgoal_graph.lookahead=15
+
+Only ``online.*`` (:class:`~ebm_agent.config.OnlineConfig`; of its fields only the evaluation ones,
+``replan_threshold`` and ``arrival_threshold``, change ``predict``) and ``subgoal_graph.*``
+(:meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions`) can be set. It is a probe for choosing settings: a
+setting worth keeping goes into the harness's hyperparameters and is measured by a run of its own, whose record
+is what the docs cite. The recorded final evaluation of an online run is EvalCallback's at the last step, planned
+with the graph of the last rebuild during ``learn``; this one plans with the graph of the whole replay buffer, as
+``predict`` after ``learn`` does, so the unchanged settings can score a little differently.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+import yaml
+from stable_baselines3.common.env_util import make_vec_env
+
+from baselines.action_ff import ActionFFAgent
+from ebm_agent.agent import EBMPlannerAgent
+from eval.evaluation import evaluate_episodes
+from eval.jobs import EVAL_SEED_OFFSET, GRAPH_TRANSITIONS
+from eval.registry import get_agent
+
+__all__ = ["PLANNERS", "SETTABLE", "apply_settings", "main", "parse_settings", "reevaluate"]
+
+SETTABLE: tuple[str, ...] = ("online", "subgoal_graph")
+"""The sections ``--set`` may change: the agent's OnlineConfig and its subgoal graph's keywords."""
+
+PLANNERS: dict[str, Any] = {cls.__name__: cls for cls in (EBMPlannerAgent, ActionFFAgent)}
+"""The agent classes with planning settings, by the class name of their harness registration."""
+
+
+def parse_settings(items: list[str]) -> dict[str, dict[str, Any]]:
+    """``["online.arrival_threshold=0.025", ...]`` -> ``{"online": {"arrival_threshold": 0.025}}`` (values as YAML).
+
+    :raises ValueError: for an item without ``SECTION.KEY=VALUE`` form or with a section outside :data:`SETTABLE`.
+    """
+    settings: dict[str, dict[str, Any]] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        section, dot, key = name.partition(".")
+        if not sep or not dot or not key:
+            raise ValueError(f"--set takes SECTION.KEY=VALUE (e.g. online.arrival_threshold=0.025), got {item!r}.")
+        if section not in SETTABLE:
+            raise ValueError(f"--set can change {', '.join(SETTABLE)} (evaluation-time settings), not {section!r}.")
+        settings.setdefault(section, {})[key] = yaml.safe_load(value)
+    return settings
+
+
+def apply_settings(model: Any, settings: dict[str, dict[str, Any]]) -> None:
+    """Change a loaded planner agent's evaluation-time settings (validated as at construction).
+
+    :param model: a :class:`~ebm_agent.base.PlannerAgentBase`.
+    :param settings: from :func:`parse_settings`.
+    :raises ValueError: for an agent without these settings (PPO, SAC), or a subgoal graph setting on an agent
+        without ``subgoal_graph``.
+    :raises TypeError: for an unknown OnlineConfig field or a value of the wrong type.
+    """
+    if not hasattr(model, "online") or not hasattr(model, "subgoal_graph"):
+        raise ValueError(f"{type(model).__name__} has no planning settings to change: only {', '.join(PLANNERS)}.")
+    if "online" in settings:
+        valid = {f.name for f in dataclasses.fields(model.online)}
+        unknown = sorted(set(settings["online"]) - valid)
+        if unknown:
+            raise TypeError(f"online: unknown keys {unknown}; valid keys are {sorted(valid)}.")
+        model.online = dataclasses.replace(model.online, **settings["online"])  # __post_init__ checks the values
+    if "subgoal_graph" in settings:
+        if model.subgoal_graph is None:
+            raise ValueError("subgoal_graph settings need a run made with subgoal_graph (this one plans to the goal).")
+        model.subgoal_graph = {**model.subgoal_graph, **settings["subgoal_graph"]}
+
+
+def reevaluate(
+    run_dir: Path, settings: dict[str, dict[str, Any]], evaluation: str | None = None, episodes: int | None = None
+) -> dict[str, Any]:
+    """Evaluate a finished run again with ``settings`` changed.
+
+    :param run_dir: a run folder of the harness (``config.yaml``, ``model.zip``, ``metrics.json``).
+    :param settings: from :func:`parse_settings` (``{}``: the run's own).
+    :param evaluation: an extra evaluation's name (``config.yaml``'s ``extra_evaluations``), or None for the main one.
+    :param episodes: deterministic episodes (default: the run's ``eval_episodes``).
+    :return: the settings, the recorded score and the new scores (``score_mean``, ``success_rate``, per episode).
+    :raises FileNotFoundError: for a folder without a finished run.
+    :raises ValueError: for an unknown evaluation, or settings the agent does not have.
+    """
+    run_dir = Path(run_dir)
+    for name in ("config.yaml", "model.zip", "metrics.json"):
+        if not (run_dir / name).is_file():
+            raise FileNotFoundError(f"{run_dir / name} is missing: re-evaluation needs a finished harness run.")
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    metrics = json.loads((run_dir / "metrics.json").read_text())
+    kwargs = dict(config["env_kwargs"] if config.get("eval_env_kwargs") is None else config["eval_env_kwargs"])
+    recorded = metrics["score_mean"]
+    if evaluation is not None:
+        extra = config.get("extra_evaluations") or {}
+        if evaluation not in extra:
+            raise ValueError(f"{run_dir} has no evaluation {evaluation!r}; it has {sorted(extra) or 'none'}.")
+        kwargs.update(extra[evaluation])
+        recorded = metrics["extra_evaluations"][evaluation]["score_mean"]
+    agent_class = PLANNERS.get(get_agent(config["agent"]).class_name or "")
+    if agent_class is None:
+        raise ValueError(f"{config['agent']!r} has no planning settings to change: only {', '.join(PLANNERS)}.")
+    # The model gets an env of its own: loading resets the env it is given, which would use up the evaluation env's
+    # seeded first reset and evaluate other episodes than the run's.
+    own_env = make_vec_env(config["env_id"], n_envs=1, seed=int(config["seed"]), env_kwargs=dict(config["env_kwargs"]))
+    env = make_vec_env(config["env_id"], n_envs=1, seed=int(config["seed"]) + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    try:
+        model = agent_class.load(run_dir / "model.zip", env=own_env, device="cpu")
+        apply_settings(model, settings)
+        graph = run_dir / GRAPH_TRANSITIONS
+        if getattr(model, "subgoal_graph", None) is not None and graph.is_file():
+            with np.load(graph) as data:
+                model.build_subgoals(data["states"], data["next_states"])
+        scores = evaluate_episodes(model, env, int(episodes or config["eval_episodes"]))
+    finally:
+        env.close()
+        own_env.close()
+    return {
+        "run": str(run_dir),
+        "evaluation": evaluation or "main",
+        "settings": settings,
+        "recorded_score_mean": recorded,
+        "score_mean": scores.score_mean,
+        "success_rate": scores.success_rate,
+        "episode_scores": scores.scores,
+        "episode_lengths": scores.lengths,
+    }
+
+
+def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
+    """The command line: ``python -m eval.reevaluate RUN_DIR [RUN_DIR ...] [--set KEY=VALUE ...]``; prints a table."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("runs", nargs="+", type=Path, help="finished run folders (runs/results/<variant>/maze/ebm/seed_0)")
+    parser.add_argument("--set", nargs="*", default=[], metavar="SECTION.KEY=VALUE", help="online.arrival_threshold=0.025")
+    parser.add_argument("--evaluation", default=None, help="one of the run's extra evaluations (e.g. pair1)")
+    parser.add_argument("--episodes", type=int, default=None, help="deterministic episodes (default: the run's)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (float results depend on it; default 1)")
+    args = parser.parse_args(argv)
+    settings = parse_settings(args.set)
+    torch.set_num_threads(args.threads)
+    results = [reevaluate(run, settings, args.evaluation, args.episodes) for run in args.runs]
+    print(f"settings: {json.dumps(settings) if settings else 'the runs own'}; evaluation: {args.evaluation or 'main'}")
+    print("| run | recorded | re-evaluated | success | mean length |")
+    print("|---|---|---|---|---|")
+    for result in results:
+        success = "-" if result["success_rate"] is None else f"{result['success_rate']:.2f}"
+        print(
+            f"| {result['run']} | {result['recorded_score_mean']:.2f} | {result['score_mean']:.2f} | {success} | "
+            f"{np.mean(result['episode_lengths']):.1f} |"
+        )
+    if len(results) > 1:
+        print(f"mean re-evaluated score: {np.mean([r['score_mean'] for r in results]):.2f} over {len(results)} runs")
+    return results
+
+
+if __name__ == "__main__":
+    main()
