@@ -107,21 +107,19 @@ class GraphSubgoals:
     move_ends: np.ndarray | None = field(default=None, repr=False)
     _tree: cKDTree = field(init=False, repr=False)
     _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
-    _node_of_cell: dict[tuple[int, ...], int] = field(default_factory=dict, init=False, repr=False)
-    _cells: set[tuple[int, ...]] = field(init=False, repr=False)
+    _node_of_cell: dict[tuple[int, ...], int] = field(init=False, repr=False)  # the visited cells -> their nodes
     _paths: dict[int, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict, init=False, repr=False)
     _last: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict, init=False, repr=False)  # row -> (state, stalls)
 
     def __post_init__(self) -> None:
         self._tree = cKDTree(self.nodes / self.step)  # Chebyshev queries in units of one step
-        self._cells = set(map(tuple, self._cell_of(self.nodes).tolist()))  # the visited cells
+        self._node_of_cell = {cell: i for i, cell in enumerate(map(tuple, self._cell_of(self.nodes).tolist()))}
         if self.unstick not in UNSTICK:
             raise ValueError(f"unstick must be one of {UNSTICK}, got {self.unstick!r}.")
         if self.unstick == "real_move":
             if self.move_starts is None or self.move_ends is None or len(self.move_starts) == 0:
                 raise ValueError("unstick='real_move' needs the real transitions (move_starts, move_ends).")
             self._move_tree = cKDTree(self.move_starts / self.step)
-            self._node_of_cell = {cell: i for i, cell in enumerate(map(tuple, self._cell_of(self.nodes).tolist()))}
 
     @classmethod
     def from_transitions(
@@ -294,7 +292,7 @@ class GraphSubgoals:
             segment = self.nodes[node] - state  # [D]
             moves = max(int(np.ceil(np.abs(segment / (self.cell * self.step)).max())), 1)
             points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
-            if not all(cell in self._cells for cell in map(tuple, self._cell_of(points[1:]).tolist())):
+            if not all(cell in self._node_of_cell for cell in map(tuple, self._cell_of(points[1:]).tolist())):
                 continue  # the segment leaves the visited cells (into a wall, or where nothing was seen)
             if self.energy is None:
                 return node
@@ -398,7 +396,7 @@ class FrontierSubgoals:
                 for sign in (-1, 1):
                     beyond = cell[None].repeat(self.depth, axis=0)  # [depth, D] the next cells that way
                     beyond[:, dim] += sign * np.arange(1, self.depth + 1)
-                    if not any(tuple(other) in graph._cells for other in beyond.tolist()):
+                    if not any(tuple(other) in graph._node_of_cell for other in beyond.tolist()):
                         neighbour = beyond[0]
                         nodes.append(index)
                         points.append((neighbour + 0.5) * side)

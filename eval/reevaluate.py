@@ -33,14 +33,18 @@ from stable_baselines3.common.env_util import make_vec_env
 
 from baselines.action_ff import ActionFFAgent
 from ebm_agent.agent import EBMPlannerAgent
-from eval.evaluation import evaluate_episodes
-from eval.jobs import EVAL_SEED_OFFSET, GRAPH_TRANSITIONS
+from eval.jobs import GRAPH_TRANSITIONS, Job
+from eval.provenance import read_metrics
 from eval.registry import get_agent
+from eval.run import evaluate_with
 
-__all__ = ["PLANNERS", "SETTABLE", "apply_settings", "main", "parse_settings", "reevaluate"]
+__all__ = ["JOB_FIELDS", "PLANNERS", "SETTABLE", "apply_settings", "main", "parse_settings", "reevaluate"]
 
 SETTABLE: tuple[str, ...] = ("online", "subgoal_graph")
 """The sections ``--set`` may change: the agent's OnlineConfig and its subgoal graph's keywords."""
+
+JOB_FIELDS: tuple[str, ...] = tuple(field.name for field in dataclasses.fields(Job))
+"""A run's ``config.yaml`` is its Job's fields plus its fingerprint and versions: these rebuild the Job."""
 
 PLANNERS: dict[str, Any] = {cls.__name__: cls for cls in (EBMPlannerAgent, ActionFFAgent)}
 """The agent classes with planning settings, by the class name of their harness registration."""
@@ -100,46 +104,40 @@ def reevaluate(
     :raises ValueError: for an unknown evaluation, or settings the agent does not have.
     """
     run_dir = Path(run_dir)
-    for name in ("config.yaml", "model.zip", "metrics.json"):
-        if not (run_dir / name).is_file():
-            raise FileNotFoundError(f"{run_dir / name} is missing: re-evaluation needs a finished harness run.")
+    metrics = read_metrics(run_dir)
+    if metrics is None or not (run_dir / "config.yaml").is_file() or not (run_dir / "model.zip").is_file():
+        raise FileNotFoundError(f"{run_dir} has no finished harness run (config.yaml, model.zip, metrics.json).")
     config = yaml.safe_load((run_dir / "config.yaml").read_text())
-    metrics = json.loads((run_dir / "metrics.json").read_text())
-    kwargs = dict(config["env_kwargs"] if config.get("eval_env_kwargs") is None else config["eval_env_kwargs"])
-    recorded = metrics["score_mean"]
+    job = Job(**{name: config[name] for name in JOB_FIELDS if name in config})
+    if episodes is not None:
+        job = dataclasses.replace(job, eval_episodes=int(episodes))
+    recorded, changes = metrics["score_mean"], {}
     if evaluation is not None:
-        extra = config.get("extra_evaluations") or {}
-        if evaluation not in extra:
-            raise ValueError(f"{run_dir} has no evaluation {evaluation!r}; it has {sorted(extra) or 'none'}.")
-        kwargs.update(extra[evaluation])
-        recorded = metrics["extra_evaluations"][evaluation]["score_mean"]
-    agent_class = PLANNERS.get(get_agent(config["agent"]).class_name or "")
+        if evaluation not in job.extra_evaluations:
+            raise ValueError(f"{run_dir} has no evaluation {evaluation!r}; it has {sorted(job.extra_evaluations) or 'none'}.")
+        recorded, changes = metrics["extra_evaluations"][evaluation]["score_mean"], job.extra_evaluations[evaluation]
+    agent_class = PLANNERS.get(get_agent(job.agent).class_name or "")
     if agent_class is None:
-        raise ValueError(f"{config['agent']!r} has no planning settings to change: only {', '.join(PLANNERS)}.")
-    # The model gets an env of its own: loading resets the env it is given, which would use up the evaluation env's
+        raise ValueError(f"{job.agent!r} has no planning settings to change: only {', '.join(PLANNERS)}.")
+    # The model gets an env of its own: loading resets the env it is given, which would use up an evaluation env's
     # seeded first reset and evaluate other episodes than the run's.
-    own_env = make_vec_env(config["env_id"], n_envs=1, seed=int(config["seed"]), env_kwargs=dict(config["env_kwargs"]))
-    env = make_vec_env(config["env_id"], n_envs=1, seed=int(config["seed"]) + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    own_env = make_vec_env(job.env_id, n_envs=1, seed=job.seed, env_kwargs=dict(job.env_kwargs))
     try:
         model = agent_class.load(run_dir / "model.zip", env=own_env, device="cpu")
         apply_settings(model, settings)
         graph = run_dir / GRAPH_TRANSITIONS
-        if getattr(model, "subgoal_graph", None) is not None and graph.is_file():
+        if model.subgoal_graph is not None and graph.is_file():
             with np.load(graph) as data:
                 model.build_subgoals(data["states"], data["next_states"])
-        scores = evaluate_episodes(model, env, int(episodes or config["eval_episodes"]))
+        scores = evaluate_with(model, job, changes)
     finally:
-        env.close()
         own_env.close()
     return {
         "run": str(run_dir),
         "evaluation": evaluation or "main",
         "settings": settings,
         "recorded_score_mean": recorded,
-        "score_mean": scores.score_mean,
-        "success_rate": scores.success_rate,
-        "episode_scores": scores.scores,
-        "episode_lengths": scores.lengths,
+        **scores,
     }
 
 
@@ -155,7 +153,8 @@ def main(argv: list[str] | None = None) -> list[dict[str, Any]]:
     settings = parse_settings(args.set)
     torch.set_num_threads(args.threads)
     results = [reevaluate(run, settings, args.evaluation, args.episodes) for run in args.runs]
-    print(f"settings: {json.dumps(settings) if settings else 'the runs own'}; evaluation: {args.evaluation or 'main'}")
+    own = json.dumps(settings) if settings else "the runs' own"
+    print(f"settings: {own}; evaluation: {args.evaluation or 'main'}")
     print("| run | recorded | re-evaluated | success | mean length |")
     print("|---|---|---|---|---|")
     for result in results:

@@ -210,7 +210,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         eval_time = time.perf_counter() - eval_start
         append_evaluation(run_dir / "evaluations.npz", timesteps, episodes)
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
-        extra = {name: _extra_evaluation(model, job, changes) for name, changes in job.extra_evaluations.items()}
+        extra = {name: evaluate_with(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
         save_graph_transitions(model, run_dir / GRAPH_TRANSITIONS)
         quality = model_quality_of(model, job)
@@ -384,8 +384,9 @@ def _learn_online(
     return timesteps, last_evaluation(eval_callback, timesteps, job.eval_episodes)
 
 
-def _extra_evaluation(model: Any, job: Job, changes: dict[str, Any]) -> dict[str, Any]:
-    """Evaluate the trained model on the evaluation env with ``changes`` to its kwargs (same seed, same episodes).
+def evaluate_with(model: Any, job: Job, changes: dict[str, Any]) -> dict[str, Any]:
+    """Evaluate the trained model on the job's evaluation env with ``changes`` to its kwargs (same seed, the job's
+    ``eval_episodes``): an extra evaluation (``{}``: the main one again, as ``eval.reevaluate`` does).
 
     :return: the env kwargs used and the scores, as in ``metrics.json``.
     """
@@ -430,6 +431,7 @@ __all__ = [
     "PROBE_TRANSITIONS",
     "RUN_LOCK",
     "agent_settings",
+    "evaluate_with",
     "evaluation_env_kwargs",
     "model_quality_of",
     "run_in_progress",

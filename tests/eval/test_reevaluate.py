@@ -68,5 +68,5 @@ def test_agents_without_planning_settings_and_unfinished_runs_are_refused(tmp_pa
     run_dir = _run(tmp_path, "random")
     with pytest.raises(ValueError, match="no planning settings"):
         reevaluate(run_dir, {})
-    with pytest.raises(FileNotFoundError, match="needs a finished harness run"):
+    with pytest.raises(FileNotFoundError, match="has no finished harness run"):
         reevaluate(tmp_path / "nothing", {})
