@@ -359,6 +359,23 @@ class EBMPlannerAgent(PlannerAgentBase):
         return plans.cpu().numpy().astype(np.float32), None, transition_energy.cpu().numpy()
 
     # --------------------------------------------------------------- training
+    def scheduled_l2_coeff(self) -> float:
+        """The L2 term's weight at the current point of ``learn``: ``l2_coeff``, annealed linearly to
+        ``online.l2_final`` between the fractions ``online.l2_anneal_start`` and ``l2_anneal_end`` of the budget.
+
+        :return: the weight (``l2_coeff`` when no anneal is set, before the anneal, or outside ``learn``).
+        """
+        final, online = self.online.l2_final, self.online
+        total = int(getattr(self, "_total_timesteps", 0) or 0)
+        if final is None or total <= 0:
+            return float(self.l2_coeff)
+        progress = min(self.num_timesteps / total, 1.0)
+        if progress < online.l2_anneal_start:
+            return float(self.l2_coeff)
+        span = online.l2_anneal_end - online.l2_anneal_start
+        weight = 1.0 if span <= 0 else min((progress - online.l2_anneal_start) / span, 1.0)
+        return float(self.l2_coeff + weight * (final - self.l2_coeff))
+
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
         positives = self._replay_positives(self._fresh_positives(segments))
         # Negatives: the planned transitions that were attempted, up to and including the one that deviated; the
@@ -367,7 +384,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_next = np.concatenate([s.planned[1:] for s in segments])  # [M, D]
         neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
         hard, num_failed = self._hard_negatives(segments) if self.online.hard_negatives else (None, 0)
-        stats = self._gradient_step(positives.states, positives.next_states, neg_states, neg_next, hard=hard)
+        l2_coeff = self.scheduled_l2_coeff()
+        stats = self._gradient_step(
+            positives.states, positives.next_states, neg_states, neg_next, hard=hard, l2_coeff=l2_coeff
+        )
+        if self.online.l2_final is not None:
+            stats["l2_coeff"] = l2_coeff
         if self.online.hard_negatives:
             stats["failed_steps"] = float(num_failed)
         if self.inverse_model is not None and positives.actions is not None:
@@ -447,6 +469,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_states: np.ndarray,
         neg_next: np.ndarray,
         hard: TransitionBatch | None = None,
+        l2_coeff: float | None = None,
     ) -> dict[str, float]:
         """One optimiser step on the contrastive loss; refuses to write non-finite weights.
 
@@ -456,10 +479,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param neg_next: [M, D] planned next states.
         :param hard: failed plan steps (``online.hard_negatives``): states s_t [H, D], next_states s'_plan [H, D],
             actions s'_real [H, D]; None for none. Not used by ``loss="infonce_reach"`` and ``"infonce"``.
+        :param l2_coeff: the L2 term's weight for this step (None: ``self.l2_coeff``; see :meth:`scheduled_l2_coeff`).
         :return: loss statistics.
         :raises FloatingPointError: on a NaN/inf loss or gradient (the weights are left untouched).
         """
         energy = self.energy_model
+        l2 = self.l2_coeff if l2_coeff is None else l2_coeff
         self._move_std = None
         if self.perturbed_negatives > 0 or self.energy_config.move_input:
             self._move_std = self._update_move_statistics(pos_states, pos_next)
@@ -479,28 +504,26 @@ class EBMPlannerAgent(PlannerAgentBase):
             # InfoNCE fixes E(s, .) only up to a constant per s; pinning the real transitions' energy to 0 makes
             # energies comparable across states (without it the per-state offset swamps the walls: AUROC ~0.53).
             anchor = energy_pos.square().mean()
-            loss = loss + self.l2_coeff * anchor
+            loss = loss + l2 * anchor
             stats.update(loss_anchor=float(anchor.detach()), loss=float(loss.detach()))
         else:
             energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
             if self.loss == "cd" and self.perturbed_negatives > 0:
                 perturbed = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, M', D]
                 energy_perturbed = energy(states[:, None, :].expand_as(perturbed), perturbed)  # [P, M']
-                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=l2)
                 # The perturbed negatives as a second CD term on the same positives, so that planned and perturbed
                 # negatives weigh equally whatever their numbers: L = E+ - (E-_plan + E-_pert) / 2 + l2 (...).
                 mean_perturbed = energy_perturbed.mean()
                 loss = 0.5 * loss + 0.5 * (
-                    energy_pos.mean()
-                    - mean_perturbed
-                    + self.l2_coeff * (energy_pos.square().mean() + energy_perturbed.square().mean())
+                    energy_pos.mean() - mean_perturbed + l2 * (energy_pos.square().mean() + energy_perturbed.square().mean())
                 )
                 stats.update(energy_perturbed=float(mean_perturbed.detach()), loss=float(loss.detach()))
             elif self.loss == "cd":
                 if hard is not None and self.online.hard_negative_loss == "negatives":
-                    loss, stats = self._cd_with_hard_negatives(energy_pos, energy_neg, hard)
+                    loss, stats = self._cd_with_hard_negatives(energy_pos, energy_neg, hard, l2)
                 else:
-                    loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=self.l2_coeff)
+                    loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=l2)
                 if hard is not None and self.online.hard_negative_loss == "margin":
                     hard_states = as_tensor(hard.states)  # [H, D]
                     energy_failed = energy(hard_states, as_tensor(hard.next_states))  # [H]
@@ -527,7 +550,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         return stats
 
     def _cd_with_hard_negatives(
-        self, energy_pos: torch.Tensor, energy_neg: torch.Tensor, hard: TransitionBatch
+        self, energy_pos: torch.Tensor, energy_neg: torch.Tensor, hard: TransitionBatch, l2_coeff: float
     ) -> tuple[torch.Tensor, dict[str, float]]:
         """The CD loss with the failed steps among its negatives (``hard_negative_loss="negatives"``).
 
@@ -537,6 +560,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param energy_pos: [P] energies of the real transitions.
         :param energy_neg: [M] energies of the planned transitions.
         :param hard: the failed steps (states [H, D], next_states s'_plan [H, D]).
+        :param l2_coeff: weight of the L2 term.
         :return: the scalar loss and its statistics (``energy_failed`` added).
         """
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
@@ -549,7 +573,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         mean_pos, mean_neg = energy_pos.mean(), (weights * negatives).sum()
         loss_ml = mean_pos - mean_neg
         loss_l2 = energy_pos.square().mean() + (weights * negatives.square()).sum()
-        loss = loss_ml + self.l2_coeff * loss_l2
+        loss = loss_ml + l2_coeff * loss_l2
         stats = {
             "energy_pos": float(mean_pos.detach()),
             "energy_neg": float(mean_neg.detach()),

@@ -74,6 +74,15 @@ class OnlineConfig:
         action bounds with this probability (the plan's segment then ends on its deviation as usual). 0 (off, the
         paper's): an energy learned only from its own plans' transitions never sees the moves its plans avoid (e.g.
         Reacher's full torques), so it keeps calling them unlikely.
+    :param l2_final: anneal the EBM's ``l2_coeff`` (the weight of the L2 term on the energies) linearly to this value
+        between the fractions ``l2_anneal_start`` and ``l2_anneal_end`` of the ``learn`` budget (SB3's progress, as
+        its learning-rate schedules; a resumed run keeps its place). None (the default): ``l2_coeff`` throughout.
+        A weaker L2 term widens the energy gap (each energy settles near +-1/(2 l2)): the sharp energy of issue 34
+        (``l2_coeff`` 0.1) tells walls apart but, learned from the start, also rates moves into the unvisited maze
+        impossible and stalls exploration; annealed late, the exploration runs on the lenient energy and the
+        evaluation plans on the sharp one. EBM agent only; pretraining uses ``l2_coeff``.
+    :param l2_anneal_start: fraction of the budget where the anneal begins (0.5).
+    :param l2_anneal_end: fraction of the budget where it reaches ``l2_final`` (0.8); equal to the start: a switch.
     """
 
     deviation_threshold: float = 0.7
@@ -101,6 +110,9 @@ class OnlineConfig:
     hard_negative_margin: float = 1.0
     hard_negative_loss: str = "margin"
     random_action_prob: float = 0.0
+    l2_final: float | None = None
+    l2_anneal_start: float = 0.5
+    l2_anneal_end: float = 0.8
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -123,6 +135,13 @@ class OnlineConfig:
             raise ValueError(f"OnlineConfig.arrival_threshold must be None (off) or >= 0, got {self.arrival_threshold!r}.")
         if not 0.0 <= self.random_action_prob <= 1.0:
             raise ValueError(f"OnlineConfig.random_action_prob must be in [0, 1], got {self.random_action_prob!r}.")
+        if self.l2_final is not None and not self.l2_final >= 0:
+            raise ValueError(f"OnlineConfig.l2_final must be None (no anneal) or >= 0, got {self.l2_final!r}.")
+        if not 0.0 <= self.l2_anneal_start <= self.l2_anneal_end <= 1.0:
+            raise ValueError(
+                "OnlineConfig.l2_anneal_start and l2_anneal_end must satisfy 0 <= start <= end <= 1 (fractions of the "
+                f"learn budget), got {self.l2_anneal_start!r} and {self.l2_anneal_end!r}."
+            )
         if not 0.0 <= self.neg_replay_prob <= 1.0:
             raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
         for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations", "hard_negative_buffer_size"):

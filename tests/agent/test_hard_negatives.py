@@ -156,7 +156,7 @@ def test_negatives_mode_at_weight_one_is_cd_over_the_joined_negatives() -> None:
         energy(torch.as_tensor(states), torch.as_tensor(next_states)),
         energy(torch.as_tensor(next_states), torch.as_tensor(states)),
     )  # [5], [5]
-    loss, stats = agent._cd_with_hard_negatives(energy_pos, energy_neg, hard)
+    loss, stats = agent._cd_with_hard_negatives(energy_pos, energy_neg, hard, agent.l2_coeff)
     joined = torch.cat([energy_neg, energy(torch.as_tensor(hard.states), torch.as_tensor(hard.next_states))])  # [10]
     expected, _ = contrastive_divergence_loss(energy_pos, joined, l2_coeff=0.5)
     assert torch.isclose(loss, expected, atol=1e-6) and stats["num_failed"] == 5.0
