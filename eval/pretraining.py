@@ -93,7 +93,7 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
     settings = {**defaults, **job.offline_kwargs}
     base, path, earlier = _load_or_build(job)
     repeat = int(settings.get("repeat", 1))
-    data = repeat_transitions(base, repeat) if repeat > 1 else base
+    data = training_data(base, job)
     updates_before = int(getattr(model, "_n_updates", 0))
     learn_offline(
         data,
@@ -114,6 +114,19 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
         "sequential": sequential,
         "gradient_steps": int(getattr(model, "_n_updates", 0)) - updates_before,
     }
+
+
+def training_data(base: TransitionDataset, job: Job) -> TransitionDataset:
+    """The transitions a pretrained job trains on (and builds its subgoal graph over): its base dataset, repeated
+    ``repeat`` times where its offline settings (``offline_kwargs`` over the dataset kind's defaults) say so.
+
+    :param base: the job's base dataset (:func:`load_or_build_dataset`).
+    :param job: the pretrained job.
+    :return: the dataset ``learn_offline`` is given.
+    """
+    defaults = SEQUENTIAL_DEFAULTS if job.dataset == "directed+sequential" else OFFLINE_DEFAULTS
+    repeat = int({**defaults, **job.offline_kwargs}.get("repeat", 1))
+    return repeat_transitions(base, repeat) if repeat > 1 else base
 
 
 def dataset_path(job: Job) -> Path:

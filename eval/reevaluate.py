@@ -3,8 +3,8 @@
 A planner agent's ``predict`` reads settings that learning never touches (when to replan, where subgoals sit): a
 change of one of them leaves the trained weights as they are. ``python -m eval.reevaluate RUN_DIR --set KEY=VALUE``
 loads the run's ``model.zip``, rebuilds its subgoal graph from ``graph_transitions.npz`` (as ``learn`` does at its
-end), applies the changes and runs the run's evaluation again (its env, seed and episodes; ``--evaluation NAME``: one
-of its extra evaluations, e.g. a maze start/goal pair)::
+end; a pretrained run's from its training dataset), applies the changes and runs the run's evaluation again (its
+env, seed and episodes; ``--evaluation NAME``: one of its extra evaluations, e.g. a maze start/goal pair)::
 
     python -m eval.reevaluate runs/results/beyond_online_explore_unstick/maze/ebm/seed_0 \\
         --set online.arrival_threshold=0.025 subgoal_graph.lookahead=15
@@ -34,11 +34,12 @@ from stable_baselines3.common.env_util import make_vec_env
 from baselines.action_ff import ActionFFAgent
 from ebm_agent.agent import EBMPlannerAgent
 from eval.jobs import GRAPH_TRANSITIONS, Job
+from eval.pretraining import load_or_build_dataset, training_data
 from eval.provenance import read_metrics
 from eval.registry import get_agent
 from eval.run import evaluate_with
 
-__all__ = ["JOB_FIELDS", "PLANNERS", "SETTABLE", "apply_settings", "main", "parse_settings", "reevaluate"]
+__all__ = ["JOB_FIELDS", "PLANNERS", "SETTABLE", "apply_settings", "graph_transitions", "main", "parse_settings", "reevaluate"]
 
 SETTABLE: tuple[str, ...] = ("online", "subgoal_graph")
 """The sections ``--set`` may change: the agent's OnlineConfig and its subgoal graph's keywords."""
@@ -125,10 +126,8 @@ def reevaluate(
     try:
         model = agent_class.load(run_dir / "model.zip", env=own_env, device="cpu")
         apply_settings(model, settings)
-        graph = run_dir / GRAPH_TRANSITIONS
-        if model.subgoal_graph is not None and graph.is_file():
-            with np.load(graph) as data:
-                model.build_subgoals(data["states"], data["next_states"])
+        if model.subgoal_graph is not None:
+            model.build_subgoals(*graph_transitions(run_dir, job))
         scores = evaluate_with(model, job, changes)
     finally:
         own_env.close()
@@ -139,6 +138,30 @@ def reevaluate(
         "recorded_score_mean": recorded,
         **scores,
     }
+
+
+def graph_transitions(run_dir: Path, job: Job) -> tuple[np.ndarray, np.ndarray]:
+    """The real transitions a run's subgoal graph was built over: its ``graph_transitions.npz`` (an online run's replay
+    buffer), or for a pretrained run its training dataset (the cached one, rebuilt the same way where missing).
+
+    :param run_dir: the run folder.
+    :param job: its job.
+    :return: states [M, D] and next states [M, D].
+    :raises FileNotFoundError: for an online run saved without ``graph_transitions.npz`` (finished before the
+        harness kept it): evaluated without its graph, it would plan straight at the goal and say nothing of it.
+    """
+    path = run_dir / GRAPH_TRANSITIONS
+    if path.is_file():
+        with np.load(path) as data:
+            return data["states"], data["next_states"]
+    if job.mode == "pretrained":
+        base, _ = load_or_build_dataset(job)
+        data = training_data(base, job)
+        return data.states, data.next_states
+    raise FileNotFoundError(
+        f"{run_dir} plans through a subgoal graph but has no {GRAPH_TRANSITIONS} (the replay buffer the graph was built "
+        "over; runs finished before the harness kept it have none): run it again to re-evaluate it."
+    )
 
 
 def main(argv: list[str] | None = None) -> list[dict[str, Any]]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from eval.jobs import Job
-from eval.reevaluate import main, parse_settings, reevaluate
+from eval.reevaluate import graph_transitions, main, parse_settings, reevaluate
 from eval.run import run_job
 
 TINY_PLANNER = {"horizon": 5, "planner_config": {"num_samples": 16, "iterations": 4}, "online": {"pos_buffer_size": 1000}}
@@ -70,3 +70,33 @@ def test_agents_without_planning_settings_and_unfinished_runs_are_refused(tmp_pa
         reevaluate(run_dir, {})
     with pytest.raises(FileNotFoundError, match="has no finished harness run"):
         reevaluate(tmp_path / "nothing", {})
+
+
+def test_a_pretrained_run_rebuilds_its_graph_from_its_dataset(tmp_path):
+    job = Job(
+        "ebm/Particle-v0",
+        "action-ff",
+        0,
+        mode="pretrained",
+        timesteps=300,
+        eval_freq=300,
+        offline_kwargs={"epochs": 1},
+        eval_episodes=1,
+        device="cpu",
+        out_dir=str(tmp_path),
+        hyperparams={**TINY_PLANNER, "subgoal_graph": {"edges": "real"}},
+    )
+    result = run_job(job)
+    assert result.ok, result.error
+    assert not (result.run_dir / "graph_transitions.npz").exists()  # a pretrained run's graph is its dataset's
+    states, next_states = graph_transitions(result.run_dir, job)
+    assert states.shape == next_states.shape == (300, 2)
+    same = reevaluate(result.run_dir, {})
+    assert same["score_mean"] == pytest.approx(same["recorded_score_mean"], abs=1e-6)
+
+
+def test_an_online_graph_run_without_its_transitions_is_refused(tmp_path):
+    run_dir = _run(tmp_path, "action-ff", subgoal_graph={"edges": "real"})
+    (run_dir / "graph_transitions.npz").unlink()
+    with pytest.raises(FileNotFoundError, match=r"no graph_transitions\.npz"):
+        reevaluate(run_dir, {})
