@@ -403,6 +403,21 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         gap = gap[:, spec.model_dims]
         return gap.max(axis=1) if reduce == "max" else gap.mean(axis=1)
 
+    def _goal_gap(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """Distance from states to goals over the goal dims (max over dims, periodic dims the short way round).
+
+        :param states: [N, D].
+        :param goals: [N, G].
+        :return: [N].
+        """
+        spec = self.goal_spec
+        assert spec is not None
+        gap = np.abs(states[:, spec.goal_indices] - goals)  # [N, G]
+        if spec.goal_period is not None:
+            wrapped = np.mod(gap, spec.goal_period)
+            gap = np.minimum(wrapped, spec.goal_period - wrapped)
+        return gap.max(axis=1)
+
     def _as_batch(self, observation: Any) -> tuple[dict[str, np.ndarray], bool]:
         if isinstance(observation, tuple) and len(observation) == 2 and isinstance(observation[1], dict):
             raise ValueError(
@@ -481,7 +496,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         The plan is carried in ``state``: pass back the returned state on the next call and set ``episode_start``
         when an episode begins. A new plan is made for an env when it has none, its episode starts, its plan ran
         out, or the real state drifted from the plan by more than ``online.replan_threshold`` (mean over dims), or
-        (with ``online.arrival_threshold``) it already reached the plan's final state.
+        (with ``online.arrival_threshold``) it already reached the plan's final state (``online.arrival_at="plan_end"``)
+        or the goal or subgoal the plan aimed at (``"aim"``).
 
         :param observation: a Dict observation, single or batched ([N, ...]).
         :param state: the state returned by the previous call (None: plan from scratch).
@@ -494,13 +510,16 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         assert spec is not None
         states, goals = batch["observation"], batch["desired_goal"]
         n, horizon = len(states), self.horizon
-        if state is not None and len(state) == 3 and state[0].shape[:2] == (n, horizon + 1):
-            plans, planned_actions, steps = (np.array(s, copy=True) for s in state)
+        if state is not None and len(state) in (3, 4) and state[0].shape[:2] == (n, horizon + 1):
+            plans, planned_actions, steps = (np.array(s, copy=True) for s in state[:3])
             steps = steps.astype(np.int64)
+            # A state from before the aims were kept (three arrays) has none: its plans count as aimed at the goals.
+            aims = np.array(state[3], dtype=np.float32, copy=True) if len(state) == 4 else goals.astype(np.float32)
         else:
             plans = np.zeros((n, horizon + 1, spec.state_dim), dtype=np.float32)
             planned_actions = np.full((n, horizon, spec.action_dim), np.nan, dtype=np.float32)
             steps = np.full(n, horizon, dtype=np.int64)
+            aims = goals.astype(np.float32)  # [N, G] the goal or subgoal each plan was made for
         need = steps >= horizon
         if episode_start is not None:
             need |= np.asarray(episode_start, dtype=bool).reshape(-1)
@@ -509,22 +528,22 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             idx = np.where(has_plan)[0]
             drift = self._deviation(states[idx], plans[idx, steps[idx]], reduce="mean")
             need[idx[drift > self.online.replan_threshold]] = True
-            if self.online.arrival_threshold is not None:  # arrived where the plan ends: the rest would only hover
-                left = self._deviation(states[idx], plans[idx, horizon], reduce="max")  # [K]
+            if self.online.arrival_threshold is not None:  # arrived: the rest of the plan would only hover
+                if self.online.arrival_at == "aim":
+                    left = self._goal_gap(states[idx], aims[idx])  # [K]
+                else:
+                    left = self._deviation(states[idx], plans[idx, horizon], reduce="max")  # [K]
                 need[idx[left <= self.online.arrival_threshold]] = True
         if need.any():
+            aims[need] = self._plan_goals(states[need], goals[need])
             new_plans, new_actions, _ = self._plan(
-                states[need],
-                self._plan_goals(states[need], goals[need]),
-                None,
-                self._fresh_generator(deterministic),
-                training=False,
+                states[need], aims[need], None, self._fresh_generator(deterministic), training=False
             )
             plans[need] = new_plans
             planned_actions[need] = np.nan if new_actions is None else new_actions
             steps[need] = 0
         actions = self._actions(states, plans, planned_actions, steps)
-        new_state = (plans, planned_actions, steps + 1)
+        new_state = (plans, planned_actions, steps + 1, aims)
         return (actions if vectorized else actions[0]), new_state
 
     # -------------------------------------------------------------- learning

@@ -13,6 +13,9 @@ T = TypeVar("T")
 HARD_NEGATIVE_LOSSES = ("margin", "negatives")
 """Values of ``OnlineConfig.hard_negative_loss``."""
 
+ARRIVAL_AT = ("plan_end", "aim")
+"""Values of ``OnlineConfig.arrival_at``."""
+
 
 @dataclass
 class OnlineConfig:
@@ -26,6 +29,10 @@ class OnlineConfig:
         model dims) of the plan's final state before the plan runs out: the plan has arrived (typically at a subgoal
         of :mod:`ebm_agent.subgoals`, which sits closer than the horizon's reach) and its remaining steps would only
         hover there; a new plan aims at the next subgoal. None (the default): plans run their course.
+    :param arrival_at: what the real state must reach for ``arrival_threshold``: ``"plan_end"`` (the default), the
+        plan's final state (max over the model dims); ``"aim"``, the goal or subgoal the plan was made for (max over
+        the goal dims). A plan that reaches a near subgoal early can wander about it for the rest of its steps and
+        end a little away from it, so its end is never reached; its aim is.
     :param closed_loop: compute each action from the *real* current state to the next planned state (True) instead
         of from planned state to planned state (the original's training mode).
     :param pos_buffer_size: capacity of the real-transition replay buffer (1e6).
@@ -88,6 +95,7 @@ class OnlineConfig:
     deviation_threshold: float = 0.7
     replan_threshold: float = 0.55
     arrival_threshold: float | None = None
+    arrival_at: str = "plan_end"
     closed_loop: bool = True
     pos_buffer_size: int = 1_000_000
     neg_buffer_size: int = 10_000
@@ -118,23 +126,20 @@ class OnlineConfig:
         check_field_types(self)
         if not self.hard_negative_threshold > 0:
             raise ValueError(f"OnlineConfig.hard_negative_threshold must be > 0, got {self.hard_negative_threshold!r}.")
-        if not self.hard_negative_weight >= 0:
-            raise ValueError(f"OnlineConfig.hard_negative_weight must be >= 0, got {self.hard_negative_weight!r}.")
-        if not self.hard_negative_margin >= 0:
-            raise ValueError(f"OnlineConfig.hard_negative_margin must be >= 0, got {self.hard_negative_margin!r}.")
-        if int(self.hard_negative_batch) < 0:
-            raise ValueError(f"OnlineConfig.hard_negative_batch must be >= 0, got {self.hard_negative_batch!r}.")
-        if self.hard_negative_loss not in HARD_NEGATIVE_LOSSES:
-            raise ValueError(
-                f"OnlineConfig.hard_negative_loss must be one of {HARD_NEGATIVE_LOSSES}, got {self.hard_negative_loss!r}."
-            )
+        for name in ("hard_negative_weight", "hard_negative_margin", "hard_negative_batch"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"OnlineConfig.{name} must be >= 0, got {getattr(self, name)!r}.")
+        for name, choices in (("hard_negative_loss", HARD_NEGATIVE_LOSSES), ("arrival_at", ARRIVAL_AT)):
+            if getattr(self, name) not in choices:
+                raise ValueError(f"OnlineConfig.{name} must be one of {choices}, got {getattr(self, name)!r}.")
         for name in ("deviation_threshold", "replan_threshold"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
         if self.arrival_threshold is not None and not self.arrival_threshold >= 0:
             raise ValueError(f"OnlineConfig.arrival_threshold must be None (off) or >= 0, got {self.arrival_threshold!r}.")
-        if not 0.0 <= self.random_action_prob <= 1.0:
-            raise ValueError(f"OnlineConfig.random_action_prob must be in [0, 1], got {self.random_action_prob!r}.")
+        for name in ("random_action_prob", "neg_replay_prob"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"OnlineConfig.{name} must be in [0, 1], got {getattr(self, name)!r}.")
         if self.l2_final is not None and not self.l2_final >= 0:
             raise ValueError(f"OnlineConfig.l2_final must be None (no anneal) or >= 0, got {self.l2_final!r}.")
         if not 0.0 <= self.l2_anneal_start <= self.l2_anneal_end <= 1.0:
@@ -142,8 +147,6 @@ class OnlineConfig:
                 "OnlineConfig.l2_anneal_start and l2_anneal_end must satisfy 0 <= start <= end <= 1 (fractions of the "
                 f"learn budget), got {self.l2_anneal_start!r} and {self.l2_anneal_end!r}."
             )
-        if not 0.0 <= self.neg_replay_prob <= 1.0:
-            raise ValueError(f"OnlineConfig.neg_replay_prob must be in [0, 1], got {self.neg_replay_prob!r}.")
         for name in ("pos_buffer_size", "neg_buffer_size", "adapt_every", "max_iterations", "hard_negative_buffer_size"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"OnlineConfig.{name} must be >= 1, got {getattr(self, name)!r}.")

@@ -38,6 +38,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 from ebm_agent.probe import transition_energies
 
 __all__ = [
+    "AIMS",
     "EDGES",
     "EXPLORE_DEFAULTS",
     "SUBGOAL_GRAPH_KEYS",
@@ -47,6 +48,9 @@ __all__ = [
     "check_long_horizon",
 ]
 
+AIMS: tuple[str, ...] = ("centre", "visited")
+"""Where a subgoal at a node sits (``aim=``): the node's cell centre, or a state visited in that cell."""
+
 UNSTICK: tuple[str, ...] = ("next_node", "real_move")
 """What a stalled plan aims at (``unstick=``): the path's next node, or the end of a real move made nearby."""
 
@@ -54,7 +58,7 @@ EDGES: tuple[str, ...] = ("energy", "real", "both")
 """Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
 
 SUBGOAL_GRAPH_KEYS = frozenset(
-    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick", "real_hops"}
+    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick", "real_hops", "aim"}
 )
 """The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
 
@@ -91,6 +95,10 @@ class GraphSubgoals:
         again.
     :param move_starts: [M, D] the real transitions' states (for ``unstick="real_move"``), or None.
     :param move_ends: [M, D] their next states, or None.
+    :param aims: [V, D] where a subgoal at each node sits (``aim="visited"``: a state visited in the node's cell), or
+        None: the nodes themselves (the cell centres). A cell that overlaps a wall can have its centre inside the
+        wall; a plan aimed there presses against the wall for its whole length. A state the agent was at is one it
+        can be at again.
     """
 
     nodes: np.ndarray
@@ -105,6 +113,7 @@ class GraphSubgoals:
     unstick: str = "next_node"
     move_starts: np.ndarray | None = field(default=None, repr=False)
     move_ends: np.ndarray | None = field(default=None, repr=False)
+    aims: np.ndarray | None = field(default=None, repr=False)
     _tree: cKDTree = field(init=False, repr=False)
     _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
     _node_of_cell: dict[tuple[int, ...], int] = field(init=False, repr=False)  # the visited cells -> their nodes
@@ -137,6 +146,7 @@ class GraphSubgoals:
         edges: str = "energy",
         unstick: str = "next_node",
         real_hops: int = 1,
+        aim: str = "centre",
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -163,6 +173,9 @@ class GraphSubgoals:
             cells only; 2 also keeps the moves that crossed a cell (a real step is up to 1/``cell`` cells long, so
             about a third of full steps at the default ``cell``), which a graph without energy edges needs to hold
             together. An edge costs the cells it spans.
+        :param aim: where a subgoal at a node sits: ``"centre"``, its cell's centre (the node itself), or
+            ``"visited"``, the real state in its cell nearest the mean of the real states there. The edges and paths
+            are the same either way (between cell centres).
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
             edges from the energy for an agent without one.
@@ -177,14 +190,19 @@ class GraphSubgoals:
         if not 0.0 < cell <= 1.0:
             raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
         check_edges(edges, agent)
+        if aim not in AIMS:
+            raise ValueError(f"aim must be one of {AIMS}, got {aim!r}.")
         if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
             raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
         rng = np.random.default_rng(seed)
         step = np.maximum(np.abs(next_states - states).max(axis=0), 1e-6)  # [D]
         side = cell * step  # [D]
-        occupied = np.unique(np.floor(states / side).astype(np.int64), axis=0)  # [V, D] visited cells
+        occupied, inverse = np.unique(np.floor(states / side).astype(np.int64), axis=0, return_inverse=True)  # [V, D]
+        aims = _visited_in_cells(states, inverse.reshape(-1), len(occupied)) if aim == "visited" else None  # [V, D]
         if len(occupied) > max_nodes:
-            occupied = occupied[np.sort(rng.choice(len(occupied), max_nodes, replace=False))]
+            subset = np.sort(rng.choice(len(occupied), max_nodes, replace=False))
+            occupied = occupied[subset]
+            aims = None if aims is None else aims[subset]
         nodes = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
         pairs = cKDTree(occupied).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2] neighbouring cells
         pairs = np.concatenate([pairs, pairs[:, ::-1]])  # both directions: feasibility is directional
@@ -220,7 +238,9 @@ class GraphSubgoals:
             cell,
             patience,
             unstick,
-            *moves,
+            move_starts=moves[0],
+            move_ends=moves[1],
+            aims=aims,
         )
 
     @property
@@ -253,8 +273,12 @@ class GraphSubgoals:
                     continue
                 chosen = path[1]  # stuck: the next node, one move away, instead of the farthest in sight
             if chosen != target:
-                out[i] = self.nodes[chosen, self.goal_indices]
+                out[i] = self._aim(chosen)[self.goal_indices]
         return out
+
+    def _aim(self, node: int) -> np.ndarray:
+        """Where a subgoal at ``node`` sits ([D]): its visited state with ``aims``, else the node (its cell's centre)."""
+        return self.nodes[node] if self.aims is None else self.aims[node]
 
     def _stalled(self, row: int, state: np.ndarray) -> bool:
         """Whether row ``row``'s state stayed put (within a quarter step) for ``patience`` calls in a row."""
@@ -276,7 +300,8 @@ class GraphSubgoals:
             return None
         cells = map(tuple, self._cell_of(self.move_ends[near]).tolist())
         cost = np.array([distance[self._node_of_cell[c]] if c in self._node_of_cell else np.inf for c in cells])  # [K]
-        better = near[cost < distance[node]]  # [B] moves that got closer
+        moved = (np.abs(self.move_ends[near] - self.move_starts[near]) / self.step).max(axis=1) >= 0.25  # [K]
+        better = near[(cost < distance[node]) & moved]  # [B] moves that went somewhere and got closer
         if len(better) == 0:
             return None
         gaps = np.abs(self.move_starts[better] - state) / self.step  # [B, D]
@@ -289,7 +314,7 @@ class GraphSubgoals:
         """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` stays in
         visited cells and, with an energy, the energy allows."""
         for node in reversed(path[1:]):
-            segment = self.nodes[node] - state  # [D]
+            segment = self._aim(node) - state  # [D]
             moves = max(int(np.ceil(np.abs(segment / (self.cell * self.step)).max())), 1)
             points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
             if not all(cell in self._node_of_cell for cell in map(tuple, self._cell_of(points[1:]).tolist())):
@@ -467,13 +492,31 @@ class FrontierSubgoals:
         path = path[::-1][: graph.lookahead + 1]  # [start, ..., at most lookahead edges along]
         chosen = graph._in_sight(state, path) if len(path) > 1 else path[-1]
         if chosen != target:
-            return graph.nodes[chosen, dims]
+            return graph._aim(chosen)[dims]
         # The frontier is in sight: push past it into the unvisited cell for the rest of the plan's moves, so that
         # a plan explores a whole horizon's worth (a wall there stops the agent, and the plans made count against F).
         moves = max(graph.lookahead - (len(path) - 1), 1)
         cell = self._frontier_cells[best]  # the push counts against F wherever the agent is (it may be past F)
         self.plan_counts[cell] = self.plan_counts.get(cell, 0) + 1
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
+
+
+def _visited_in_cells(states: np.ndarray, cell_of_state: np.ndarray, num_cells: int) -> np.ndarray:
+    """For each cell, the state in it nearest (max over dims) the mean of the states in it.
+
+    :param states: [M, D] states.
+    :param cell_of_state: [M] the index of each state's cell (every cell holds at least one state).
+    :param num_cells: V, the number of cells.
+    :return: [V, D] one visited state per cell.
+    """
+    counts = np.bincount(cell_of_state, minlength=num_cells)  # [V]
+    sums = np.zeros((num_cells, states.shape[1]), dtype=np.float64)  # [V, D]
+    np.add.at(sums, cell_of_state, states)
+    means = sums / counts[:, None]  # [V, D]
+    gap = np.abs(states - means[cell_of_state]).max(axis=1)  # [M]
+    order = np.lexsort((gap, cell_of_state))  # by cell, nearest the mean first
+    first = order[np.concatenate([[0], np.flatnonzero(np.diff(cell_of_state[order])) + 1])]  # [V]
+    return states[first].astype(np.float32)
 
 
 def _real_moves(

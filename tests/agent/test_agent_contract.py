@@ -132,8 +132,8 @@ def test_batched_predict_and_state_carry(agent_class):
     actions, state = agent.predict(obs, deterministic=True)
     assert actions.shape == (3, 2)
     assert np.all(np.abs(actions) <= 1.0)
-    plans, _, steps = state
-    assert plans.shape == (3, agent.horizon + 1, 2)
+    plans, _, steps, aims = state
+    assert plans.shape == (3, agent.horizon + 1, 2) and np.array_equal(aims, obs["desired_goal"])
     np.testing.assert_allclose(plans[:, 0], obs["observation"], atol=1e-6)  # the start is pinned
     assert np.all(steps == 1)
     _, state = agent.predict(obs, state=state, episode_start=np.zeros(3, dtype=bool), deterministic=True)
@@ -147,11 +147,32 @@ def test_arrival_threshold_replans_a_plan_that_has_arrived(agent_class):
     keep = np.zeros(2, dtype=bool)
     for threshold, expected in ((None, [2, 2]), (0.01, [1, 2])):
         agent = make_agent(agent_class, vec, online={**FAST_KWARGS[agent_class]["online"], "arrival_threshold": threshold})
-        _, (plans, actions, steps) = agent.predict(obs, deterministic=True)
+        _, (plans, actions, steps, aims) = agent.predict(obs, deterministic=True)
         plans[0, -1] = obs["observation"][0]  # env 0's plan ends where it already is: nothing left but hovering
         plans[1, -1] = obs["observation"][1] + 0.5  # env 1's plan still has somewhere to go
-        _, state = agent.predict(obs, state=(plans, actions, steps), episode_start=keep, deterministic=True)
+        _, state = agent.predict(obs, state=(plans, actions, steps, aims), episode_start=keep, deterministic=True)
         assert state[2].tolist() == expected  # a new plan restarts at step 1; a followed one goes on to step 2
+        # A state of three arrays (before predict kept the aims) is followed as before.
+        _, state = agent.predict(obs, state=(plans, actions, steps), episode_start=keep, deterministic=True)
+        assert state[2].tolist() == expected
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_arrival_at_the_aim_replans_a_plan_whose_aim_is_reached(agent_class):
+    vec = DummyVecEnv([lambda: gym.make("ebm/Particle-v0")] * 2)
+    obs = vec.reset()
+    keep = np.zeros(2, dtype=bool)
+    for arrival_at, expected in (("plan_end", [2, 2]), ("aim", [1, 2])):
+        online = {**FAST_KWARGS[agent_class]["online"], "arrival_threshold": 0.01, "arrival_at": arrival_at}
+        agent = make_agent(agent_class, vec, online=online)
+        _, (plans, actions, steps, aims) = agent.predict(obs, deterministic=True)
+        assert np.array_equal(aims, obs["desired_goal"])  # no subgoals: each plan aims at its goal
+        plans[:, -1] = obs["observation"] + 0.5  # neither plan ends where its env is
+        aims[0] = obs["observation"][0]  # env 0 already stands at its plan's aim: the plan has done its job
+        _, state = agent.predict(obs, state=(plans, actions, steps, aims), episode_start=keep, deterministic=True)
+        assert state[2].tolist() == expected
+    with pytest.raises(ValueError, match="arrival_at must be one of"):
+        make_agent(agent_class, vec, online={"arrival_at": "goal"})
 
 
 def test_arrival_threshold_rejects_bad_values():

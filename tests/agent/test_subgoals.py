@@ -350,3 +350,44 @@ def test_real_hops_keeps_the_real_moves_that_crossed_a_cell_at_the_cost_of_the_c
     assert set(spans.tolist()) == {1, 2} and np.allclose(np.asarray(two.graph[rows, cols]).ravel(), spans)
     with pytest.raises(ValueError, match="real_hops"):
         GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", real_hops=0)
+
+
+def test_a_stalled_plan_never_repeats_a_move_that_went_nowhere():
+    states, following = _walk()
+    here, goal = np.array([[-0.9, -0.4]], np.float32), np.array([[-0.2, -0.8]], np.float32)
+    offsets = np.stack(np.meshgrid(*[np.linspace(-0.02, 0.02, 5)] * 2), axis=-1).reshape(-1, 2)  # [25, 2]
+    stuck = (here + offsets).astype(np.float32)  # moves refused from right beside here, some in cells nearer the goal
+    states, following = np.concatenate([states, stuck]), np.concatenate([following, stuck])
+    graph = GraphSubgoals.from_transitions(
+        _energy_free_agent(), states, following, edges="real", patience=1, unstick="real_move"
+    )
+    graph.subgoals(here, goal)
+    for _ in range(5):  # stalled: each call repeats a real move, never one that stayed put
+        out = graph.subgoals(here, goal)[0]
+        assert np.abs(out - here[0]).max() >= 0.25 * graph.step.max() - 1e-6
+
+
+def test_aim_visited_puts_the_subgoals_on_states_the_agent_was_at():
+    states, following = _walk()
+    agent = _energy_free_agent()
+    centre = GraphSubgoals.from_transitions(agent, states, following, edges="real")
+    visited = GraphSubgoals.from_transitions(agent, states, following, edges="real", aim="visited")
+    assert centre.aims is None and np.array_equal(visited.nodes, centre.nodes)  # the same graph
+    assert visited.aims is not None and visited.aims.shape == visited.nodes.shape
+    assert np.array_equal(visited._cell_of(visited.aims), visited._cell_of(visited.nodes))  # each in its node's cell
+    seen = {tuple(s) for s in states.tolist()}
+    assert all(tuple(a) in seen for a in visited.aims.tolist())  # each a state the agent was at
+    start, goal = np.array([[-0.8, -0.8]], np.float32), np.array([[0.8, -0.8]], np.float32)
+    subgoal = visited.subgoals(start, goal)[0]
+    assert any(np.array_equal(subgoal, a) for a in visited.aims) and not np.allclose(subgoal, goal[0])
+    with pytest.raises(ValueError, match="aim must be one of"):
+        GraphSubgoals.from_transitions(agent, states, following, edges="real", aim="corner")
+
+
+def test_the_visited_state_of_a_cell_is_the_one_nearest_its_mean():
+    from ebm_agent.subgoals import _visited_in_cells
+
+    states = np.array([[0.0, 0.0], [0.4, 0.4], [1.0, 1.0], [5.0, 5.0], [5.2, 5.0]], np.float32)  # [5, 2]
+    cells = np.array([0, 0, 0, 1, 1])
+    chosen = _visited_in_cells(states, cells, 2)
+    assert chosen.tolist() == [[0.4000000059604645, 0.4000000059604645], [5.0, 5.0]]  # mean 0.467; a tie: the first
