@@ -58,7 +58,20 @@ EDGES: tuple[str, ...] = ("energy", "real", "both")
 """Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
 
 SUBGOAL_GRAPH_KEYS = frozenset(
-    {"lookahead", "quantile", "cell", "clearance", "max_nodes", "seed", "patience", "edges", "unstick", "real_hops", "aim"}
+    {
+        "lookahead",
+        "quantile",
+        "cell",
+        "clearance",
+        "max_nodes",
+        "seed",
+        "patience",
+        "edges",
+        "unstick",
+        "real_hops",
+        "aim",
+        "stall_penalty",
+    }
 )
 """The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
 
@@ -95,6 +108,11 @@ class GraphSubgoals:
         again.
     :param move_starts: [M, D] the real transitions' states (for ``unstick="real_move"``), or None.
     :param move_ends: [M, D] their next states, or None.
+    :param stall_penalty: with a number, each stalled call (see ``patience``) adds it to the cost of the first edge of
+        the row's path (its node to the next), and the paths are searched again: a real step that stays put where the
+        graph said a move was possible is evidence against that move (e.g. a cell that straddles a wall's corner, which
+        visited states on either side make look open). The graph is changed for good (later episodes avoid the move
+        too) until it is rebuilt. None (the default): the graph never changes.
     :param aims: [V, D] where a subgoal at each node sits (``aim="visited"``: a state visited in the node's cell), or
         None: the nodes themselves (the cell centres). A cell that overlaps a wall can have its centre inside the
         wall; a plan aimed there presses against the wall for its whole length. A state the agent was at is one it
@@ -114,6 +132,7 @@ class GraphSubgoals:
     move_starts: np.ndarray | None = field(default=None, repr=False)
     move_ends: np.ndarray | None = field(default=None, repr=False)
     aims: np.ndarray | None = field(default=None, repr=False)
+    stall_penalty: float | None = None
     _tree: cKDTree = field(init=False, repr=False)
     _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
     _node_of_cell: dict[tuple[int, ...], int] = field(init=False, repr=False)  # the visited cells -> their nodes
@@ -147,6 +166,7 @@ class GraphSubgoals:
         unstick: str = "next_node",
         real_hops: int = 1,
         aim: str = "centre",
+        stall_penalty: float | None = None,
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -176,6 +196,8 @@ class GraphSubgoals:
         :param aim: where a subgoal at a node sits: ``"centre"``, its cell's centre (the node itself), or
             ``"visited"``, the real state in its cell nearest the mean of the real states there. The edges and paths
             are the same either way (between cell centres).
+        :param stall_penalty: cost added to a path's first edge each time a plan stalls on it (see the class; needs
+            ``patience``); None: never.
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
             edges from the energy for an agent without one.
@@ -226,6 +248,11 @@ class GraphSubgoals:
         horizon = int(agent.horizon) if lookahead is None else int(lookahead)
         if patience is not None and (isinstance(patience, bool) or not isinstance(patience, int) or patience < 1):
             raise ValueError(f"patience must be None or a positive int, got {patience!r}.")
+        if stall_penalty is not None and (patience is None or not stall_penalty > 0):
+            raise ValueError(
+                f"stall_penalty must be None or > 0 and needs patience (when a plan has stalled), got {stall_penalty!r} "
+                f"with patience {patience!r}."
+            )
         moves = (states, next_states) if unstick == "real_move" else (None, None)
         return cls(
             nodes,
@@ -241,6 +268,7 @@ class GraphSubgoals:
             move_starts=moves[0],
             move_ends=moves[1],
             aims=aims,
+            stall_penalty=stall_penalty,
         )
 
     @property
@@ -258,15 +286,20 @@ class GraphSubgoals:
         out = np.array(goals, dtype=np.float32, copy=True)  # [N, G]
         for i, (state, goal) in enumerate(zip(np.asarray(states, np.float32), out)):
             target = self._goal_node(goal)
-            distance, toward = self._paths_to(target)
-            node = self._start_node(state, distance)
-            if node is None:
+            path = self._path_ahead(state, target)
+            if path is None:
                 continue  # no path from here: plan towards the goal as before
-            path = [node]
-            while len(path) <= self.lookahead and path[-1] != target:
-                path.append(int(toward[path[-1]]))
+            stalled = self._stalled(i, state)
+            if stalled and len(path) > 1 and self.stall_penalty is not None:
+                self.graph[path[0], path[1]] += self.stall_penalty  # an existing edge: the sparsity stays the same
+                self._paths.clear()
+                path = self._path_ahead(state, target)
+                if path is None:
+                    continue
+            node = path[0]
+            distance, _ = self._paths_to(target)
             chosen = self._in_sight(state, path)
-            if self._stalled(i, state) and len(path) > 1:
+            if stalled and len(path) > 1:
                 move = self._real_move(i, state, node, distance) if self.unstick == "real_move" else None
                 if move is not None:
                     out[i] = move[self.goal_indices]  # stuck: where a real move from nearby went, along the path
@@ -279,6 +312,18 @@ class GraphSubgoals:
     def _aim(self, node: int) -> np.ndarray:
         """Where a subgoal at ``node`` sits ([D]): its visited state with ``aims``, else the node (its cell's centre)."""
         return self.nodes[node] if self.aims is None else self.aims[node]
+
+    def _path_ahead(self, state: np.ndarray, target: int) -> list[int] | None:
+        """The first ``lookahead`` edges of the shortest path from the state's node to ``target`` (nodes), or None
+        where no node near the state has a path."""
+        distance, toward = self._paths_to(target)
+        node = self._start_node(state, distance)
+        if node is None:
+            return None
+        path = [node]
+        while len(path) <= self.lookahead and path[-1] != target:
+            path.append(int(toward[path[-1]]))
+        return path
 
     def _stalled(self, row: int, state: np.ndarray) -> bool:
         """Whether row ``row``'s state stayed put (within a quarter step) for ``patience`` calls in a row."""

@@ -391,3 +391,33 @@ def test_the_visited_state_of_a_cell_is_the_one_nearest_its_mean():
     cells = np.array([0, 0, 0, 1, 1])
     chosen = _visited_in_cells(states, cells, 2)
     assert chosen.tolist() == [[0.4000000059604645, 0.4000000059604645], [5.0, 5.0]]  # mean 0.467; a tie: the first
+
+
+def test_a_stall_makes_the_first_edge_of_the_path_dearer_and_the_path_goes_another_way():
+    states, following = _walk()
+    here, goal = np.array([[-0.9, -0.4]], np.float32), np.array([[-0.2, -0.8]], np.float32)
+    graph = GraphSubgoals.from_transitions(
+        _energy_free_agent(), states, following, edges="real", patience=1, stall_penalty=1000.0
+    )
+    target = graph._goal_node(goal[0])
+    before = graph._path_ahead(here[0], target)
+    assert before is not None and len(before) > 1
+    cost = graph.graph[before[0], before[1]]
+    graph.subgoals(here, goal)  # the first call: not stalled yet
+    assert graph.graph[before[0], before[1]] == cost
+    graph.subgoals(here, goal)  # stalled at the same state: its path's first move is evidence-against
+    assert graph.graph[before[0], before[1]] == cost + 1000.0
+    after = graph._path_ahead(here[0], target)
+    assert after is not None and after[:2] != before[:2]  # searched again: another first move
+    plain = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", patience=1)
+    for _ in range(3):
+        plain.subgoals(here, goal)
+    fresh = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    assert (plain.graph != fresh.graph).nnz == 0  # without the penalty the graph never changes
+
+
+def test_stall_penalty_needs_patience_and_a_positive_value():
+    states, following = _walk(steps=2000)
+    for kwargs in ({"stall_penalty": 5.0}, {"stall_penalty": 0.0, "patience": 2}):
+        with pytest.raises(ValueError, match="stall_penalty must be None or > 0"):
+            GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", **kwargs)
