@@ -95,7 +95,7 @@ def test_predict_gives_finite_in_bounds_actions_or_a_documented_error(agent, obs
 @FAST
 @given(starts=hnp.arrays(np.float32, (3, 2), elements=in_box), goals=hnp.arrays(np.float32, (3, 2), elements=in_box))
 def test_batched_predict_matches_the_batch(agent, starts, goals):
-    actions, (plans, _, steps) = agent.predict({"observation": starts, "desired_goal": goals}, deterministic=True)
+    actions, (plans, _, steps, _) = agent.predict({"observation": starts, "desired_goal": goals}, deterministic=True)
     assert actions.shape == (3, 2) and np.all(np.isfinite(actions)) and np.all(np.abs(actions) <= 1.0)
     assert np.all(np.isfinite(plans)) and np.all(steps == 1)
 

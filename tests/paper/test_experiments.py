@@ -89,8 +89,8 @@ def test_cells_configure_their_runs(tmp_path):
     assert variable.env_kwargs == {"goal": "variable"} == variable.eval_env_kwargs
     cells = parts["inverse_dynamics/particle"].cells
     kinds = [c.jobs[0].hyperparams.get("inverse_dynamics") for c in cells]
-    assert kinds == [None, "mlp", "rls", "mlp"]
-    assert [c.jobs[0].mode for c in cells] == ["online", "online", "online", "untrained"]  # the MLP's control
+    assert kinds == [None, "mlp", "rls", "mlp", "mlp", "mlp"]
+    assert [c.jobs[0].mode for c in cells] == ["online", "online", "online", "untrained", "online", "untrained"]  # + controls
     # The fixed-on-variable evaluation reads the very runs of Table 2's online fixed-goal cells.
     fixed = parts["table2/sawyer/online_fixed"].cells
     on_variable = parts["fixed_on_variable/sawyer"].cells
