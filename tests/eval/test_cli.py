@@ -112,6 +112,17 @@ def test_every_bundled_preset_is_valid():
     assert load_preset(str(REPO / "eval" / "presets" / "smoke.yaml"))["timesteps"] == 200
 
 
+@pytest.mark.parametrize("name", ["maze_demo", "maze_follow"])
+def test_the_maze_presets_build_their_agents(name):
+    from eval.registry import get_agent
+
+    preset = load_preset(name)
+    for agent, hyperparams in preset["hyperparams"].items():
+        model = get_agent(agent).factory("ebm/Maze-v0", {}, 0, None, "cpu", dict(hyperparams), 0)
+        assert model.subgoal_graph == hyperparams["subgoal_graph"], agent
+        assert model.explore["every"] == hyperparams["explore"]["every"], agent
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
