@@ -101,8 +101,9 @@ class GraphSubgoals:
         the previous call that many times in a row (a plan that keeps running into something the graph's segment
         test let through, such as a wall's corner) aims as ``unstick`` says; None (the default): never.
     :param unstick: where a stalled row aims: ``"next_node"`` (the next node of its path) or ``"real_move"``: the state
-        plus the move of a real transition that started within half a real step of it and ended in a cell closer to
-        the goal along the graph (the nearest such start first, the next nearest at each further stalled call; the
+        plus the move of a real transition that started within half a real step of it, moved at least a quarter of a
+        real step (a refused move goes nowhere) and ended in a cell closer to the goal along the graph (the nearest
+        such start first, the next nearest at each further stalled call; the
         path's next node where none did). A node's centre one move away can lie across a wall's corner from the
         state, where a move from a nearby visited state did get through: a move the agent made is one it can make
         again.
