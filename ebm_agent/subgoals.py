@@ -71,6 +71,7 @@ SUBGOAL_GRAPH_KEYS = frozenset(
         "real_hops",
         "aim",
         "stall_penalty",
+        "direct_when_nearer",
     }
 )
 """The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
@@ -114,6 +115,11 @@ class GraphSubgoals:
         graph said a move was possible is evidence against that move (e.g. a cell that straddles a wall's corner, which
         visited states on either side make look open). The graph is changed for good (later episodes avoid the move
         too) until it is rebuilt. None (the default): the graph never changes.
+    :param direct_when_nearer: plan straight at the goal where the state is nearer it (max over the goal dims, in real
+        steps) than the graph's node nearest the goal is. With a goal outside what was visited, that node is the
+        graph's best stand-in for the goal; once the agent is past it, following the graph leads back to it (and a
+        replan on arrival then turns the agent to and fro). False (the default): the graph is followed wherever the
+        agent is.
     :param aims: [V, D] where a subgoal at each node sits (``aim="visited"``: a state visited in the node's cell), or
         None: the nodes themselves (the cell centres). A cell that overlaps a wall can have its centre inside the
         wall; a plan aimed there presses against the wall for its whole length. A state the agent was at is one it
@@ -134,6 +140,7 @@ class GraphSubgoals:
     move_ends: np.ndarray | None = field(default=None, repr=False)
     aims: np.ndarray | None = field(default=None, repr=False)
     stall_penalty: float | None = None
+    direct_when_nearer: bool = False
     _tree: cKDTree = field(init=False, repr=False)
     _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
     _node_of_cell: dict[tuple[int, ...], int] = field(init=False, repr=False)  # the visited cells -> their nodes
@@ -168,6 +175,7 @@ class GraphSubgoals:
         real_hops: int = 1,
         aim: str = "centre",
         stall_penalty: float | None = None,
+        direct_when_nearer: bool = False,
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
@@ -199,6 +207,8 @@ class GraphSubgoals:
             are the same either way (between cell centres).
         :param stall_penalty: cost added to a path's first edge each time a plan stalls on it (see the class; needs
             ``patience``); None: never.
+        :param direct_when_nearer: plan straight at a goal the state is nearer than the graph's nearest node is (see
+            the class).
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
             edges from the energy for an agent without one.
@@ -270,6 +280,7 @@ class GraphSubgoals:
             move_ends=moves[1],
             aims=aims,
             stall_penalty=stall_penalty,
+            direct_when_nearer=bool(direct_when_nearer),
         )
 
     @property
@@ -287,6 +298,8 @@ class GraphSubgoals:
         out = np.array(goals, dtype=np.float32, copy=True)  # [N, G]
         for i, (state, goal) in enumerate(zip(np.asarray(states, np.float32), out)):
             target = self._goal_node(goal)
+            if self.direct_when_nearer and self._nearer_than(state, goal, target):
+                continue  # past the graph's best stand-in for the goal: plan straight at it
             path = self._path_ahead(state, target)
             if path is None:
                 continue  # no path from here: plan towards the goal as before
@@ -309,6 +322,11 @@ class GraphSubgoals:
             if chosen != target:
                 out[i] = self._aim(chosen)[self.goal_indices]
         return out
+
+    def _nearer_than(self, state: np.ndarray, goal: np.ndarray, node: int) -> bool:
+        """Whether ``state`` is nearer ``goal`` than ``node`` is (max over the goal dims, in real steps)."""
+        dims, scale = self.goal_indices, self.step[self.goal_indices]
+        return bool((np.abs(state[dims] - goal) / scale).max() < (np.abs(self.nodes[node, dims] - goal) / scale).max())
 
     def _aim(self, node: int) -> np.ndarray:
         """Where a subgoal at ``node`` sits ([D]): its visited state with ``aims``, else the node (its cell's centre)."""

@@ -421,3 +421,17 @@ def test_stall_penalty_needs_patience_and_a_positive_value():
     for kwargs in ({"stall_penalty": 5.0}, {"stall_penalty": 0.0, "patience": 2}):
         with pytest.raises(ValueError, match="stall_penalty must be None or > 0"):
             GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", **kwargs)
+
+
+def test_direct_when_nearer_plans_straight_at_a_goal_past_the_graph():
+    states, following = _walk()
+    keep = states[:, 0] < 0.5  # nothing visited right of x = 0.5: the goal lies outside the graph
+    states, following = states[keep], np.minimum(following[keep], 0.499)
+    goal = np.array([[0.9, -0.8]], np.float32)
+    past = np.array([[0.7, -0.75]], np.float32)  # nearer the goal than any node
+    behind = np.array([[-0.8, -0.8]], np.float32)  # across the wall: the graph's way round still counts
+    follow = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    direct = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", direct_when_nearer=True)
+    assert not np.allclose(follow.subgoals(past, goal), goal)  # back to the graph's node nearest the goal
+    assert np.allclose(direct.subgoals(past, goal), goal)
+    assert np.array_equal(direct.subgoals(behind, goal), follow.subgoals(behind, goal))
