@@ -395,28 +395,26 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         spec = self.goal_spec
         assert spec is not None
         gap = np.abs(real - planned)  # [N, D]
-        if spec.goal_period is not None:
-            # Periodic goal dims (Reacher's normalised angles) are compared the short way round the circle:
-            # a state that wraps from 0.99 to -0.99 has moved by 0.02, not 1.98.
-            wrapped = np.mod(gap[:, spec.goal_indices], spec.goal_period)
-            gap[:, spec.goal_indices] = np.minimum(wrapped, spec.goal_period - wrapped)
+        dims = spec.goal_indices
+        gap[:, dims] = self._goal_gaps(real[:, dims], planned[:, dims])
         gap = gap[:, spec.model_dims]
         return gap.max(axis=1) if reduce == "max" else gap.mean(axis=1)
 
-    def _goal_gap(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
-        """Distance from states to goals over the goal dims (max over dims, periodic dims the short way round).
+    def _goal_gaps(self, points: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        """|points - goals| per goal dim; periodic goal dims (Reacher's normalised angles) the short way round the
+        circle: a state that wraps from 0.99 to -0.99 has moved by 0.02, not 1.98.
 
-        :param states: [N, D].
+        :param points: [N, G] points in the goal dims.
         :param goals: [N, G].
-        :return: [N].
+        :return: [N, G].
         """
         spec = self.goal_spec
         assert spec is not None
-        gap = np.abs(states[:, spec.goal_indices] - goals)  # [N, G]
+        gap = np.abs(points - goals)  # [N, G]
         if spec.goal_period is not None:
             wrapped = np.mod(gap, spec.goal_period)
             gap = np.minimum(wrapped, spec.goal_period - wrapped)
-        return gap.max(axis=1)
+        return gap
 
     def _as_batch(self, observation: Any) -> tuple[dict[str, np.ndarray], bool]:
         if isinstance(observation, tuple) and len(observation) == 2 and isinstance(observation[1], dict):
@@ -530,7 +528,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             need[idx[drift > self.online.replan_threshold]] = True
             if self.online.arrival_threshold is not None:  # arrived: the rest of the plan would only hover
                 if self.online.arrival_at == "aim":
-                    left = self._goal_gap(states[idx], aims[idx])  # [K]
+                    left = self._goal_gaps(states[idx][:, spec.goal_indices], aims[idx]).max(axis=1)  # [K]
                 else:
                     left = self._deviation(states[idx], plans[idx, horizon], reduce="max")  # [K]
                 need[idx[left <= self.online.arrival_threshold]] = True
@@ -655,12 +653,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             if need.any():
                 self._plan_needed(np.where(need)[0], states, goals, loop)
                 idx = np.where(need)[0]
-                goal_gap = np.abs(plans[idx, -1][:, spec.goal_indices] - goals[idx])  # [n, G]
-                if spec.goal_period is not None:
-                    goal_gap = np.minimum(
-                        np.mod(goal_gap, spec.goal_period), spec.goal_period - np.mod(goal_gap, spec.goal_period)
-                    )
-                goal_gap = goal_gap.sum(axis=1)
+                goal_gap = self._goal_gaps(plans[idx, -1][:, spec.goal_indices], goals[idx]).sum(axis=1)  # [n]
                 self.logger.record_mean("plan/goal_dist", float(goal_gap.mean()))
                 steps[idx], need[idx] = 0, False
                 self.num_plans += len(idx)

@@ -86,11 +86,7 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
             "pretrained jobs need the EBM agent or Action FF"
         )
     sequential = job.dataset == "directed+sequential"
-    defaults = SEQUENTIAL_DEFAULTS if sequential else OFFLINE_DEFAULTS
-    unknown = sorted(set(job.offline_kwargs) - set(defaults))
-    if unknown:
-        raise ValueError(f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r}; known: {sorted(defaults)}")
-    settings = {**defaults, **job.offline_kwargs}
+    settings = offline_settings(job)
     base, path, earlier = _load_or_build(job)
     repeat = int(settings.get("repeat", 1))
     data = training_data(base, job)
@@ -116,16 +112,29 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
     }
 
 
+def offline_settings(job: Job) -> dict[str, Any]:
+    """A pretrained job's ``learn_offline`` settings: its ``offline_kwargs`` over its dataset kind's defaults.
+
+    :param job: the pretrained job.
+    :return: ``epochs``, ``batch_size`` and, for the sequential dataset, ``repeat``.
+    :raises ValueError: for ``offline_kwargs`` the dataset kind does not understand.
+    """
+    defaults = SEQUENTIAL_DEFAULTS if job.dataset == "directed+sequential" else OFFLINE_DEFAULTS
+    unknown = sorted(set(job.offline_kwargs) - set(defaults))
+    if unknown:
+        raise ValueError(f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r}; known: {sorted(defaults)}")
+    return {**defaults, **job.offline_kwargs}
+
+
 def training_data(base: TransitionDataset, job: Job) -> TransitionDataset:
     """The transitions a pretrained job trains on (and builds its subgoal graph over): its base dataset, repeated
-    ``repeat`` times where its offline settings (``offline_kwargs`` over the dataset kind's defaults) say so.
+    ``repeat`` times where its :func:`offline_settings` say so.
 
     :param base: the job's base dataset (:func:`load_or_build_dataset`).
     :param job: the pretrained job.
     :return: the dataset ``learn_offline`` is given.
     """
-    defaults = SEQUENTIAL_DEFAULTS if job.dataset == "directed+sequential" else OFFLINE_DEFAULTS
-    repeat = int({**defaults, **job.offline_kwargs}.get("repeat", 1))
+    repeat = int(offline_settings(job).get("repeat", 1))
     return repeat_transitions(base, repeat) if repeat > 1 else base
 
 
@@ -393,6 +402,8 @@ __all__ = [
     "collection_checkpoint_dir",
     "dataset_path",
     "load_or_build_dataset",
+    "offline_settings",
     "pretrain",
     "repeat_transitions",
+    "training_data",
 ]

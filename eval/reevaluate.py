@@ -10,7 +10,7 @@ env, seed and episodes; ``--evaluation NAME``: one of its extra evaluations, e.g
         --set online.arrival_threshold=0.025 subgoal_graph.lookahead=15
 
 Only ``online.*`` (:class:`~ebm_agent.config.OnlineConfig`; of its fields only the evaluation ones,
-``replan_threshold`` and ``arrival_threshold``, change ``predict``) and ``subgoal_graph.*``
+``replan_threshold``, ``arrival_threshold`` and ``arrival_at``, change ``predict``) and ``subgoal_graph.*``
 (:meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions`) can be set. It is a probe for choosing settings: a
 setting worth keeping goes into the harness's hyperparameters and is measured by a run of its own, whose record
 is what the docs cite. The recorded final evaluation of an online run is EvalCallback's at the last step, planned

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from eval.jobs import Job
@@ -100,3 +101,20 @@ def test_an_online_graph_run_without_its_transitions_is_refused(tmp_path):
     (run_dir / "graph_transitions.npz").unlink()
     with pytest.raises(FileNotFoundError, match=r"no graph_transitions\.npz"):
         reevaluate(run_dir, {})
+
+
+def test_offline_settings_and_training_data_follow_the_dataset_kind():
+    from ebm_agent.datasets import TransitionDataset
+    from eval.pretraining import offline_settings, training_data
+
+    def job(dataset, **offline):
+        return Job("ebm/Particle-v0", "ebm", 0, 10, 10, 1, mode="pretrained", dataset=dataset, offline_kwargs=offline)
+
+    assert offline_settings(job("random")) == {"epochs": 10, "batch_size": 256}
+    assert offline_settings(job("directed+sequential", repeat=3))["repeat"] == 3
+    with pytest.raises(ValueError, match=r"offline_kwargs \['repeat'\] are not understood"):
+        offline_settings(job("random", repeat=3))
+    zeros = np.zeros((4, 2), np.float32)
+    base = TransitionDataset(zeros, zeros, zeros, np.arange(4))
+    assert training_data(base, job("random")) is base
+    assert len(training_data(base, job("directed+sequential", repeat=3))) == 12
