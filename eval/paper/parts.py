@@ -238,6 +238,7 @@ def make_cell(
     key: str | None = None,
     why: str | None = None,
     part: str = "",
+    seeds: dict[str, list[int]] | None = None,
 ) -> Cell:
     """A cell with one job per seed, at the context's scale.
 
@@ -264,9 +265,20 @@ def make_cell(
     :param key: see :class:`Cell`.
     :param why: see :class:`Cell`.
     :param part: see :class:`Cell`.
+    :param seeds: the cell's own training seeds by scale name (``{paper: [0, 1, 2, 3, 4]}``: more seeds where a
+        comparison needs them); a scale it does not name uses the scale's seeds, and ``--seeds`` (the context's
+        seeds) overrides both.
     :return: the cell.
     """
     scale = context.scale
+    unknown_scales = sorted(set(seeds or {}) - set(SCALES))
+    if unknown_scales:
+        raise ValueError(
+            f"paper.yaml: cell {setting!r} ({part}) names seeds of unknown scales {unknown_scales}; known: {sorted(SCALES)}"
+        )
+    cell_seeds = context.seeds_for()
+    if context.seeds is None and seeds and scale.name in seeds:
+        cell_seeds = _seed_tuple(seeds[scale.name], f"the seeds of cell {setting!r} ({part}) at scale {scale.name}")
     env_id = ENV_IDS[env]
     train_kwargs = {**scale.env_kwargs, **(env_kwargs or {})}
     agent_kwargs = {
@@ -304,9 +316,18 @@ def make_cell(
             variant=str(Path(scale.folder) / variant) if scale.folder else variant,
             preset=preset,
         )
-        for seed in context.seeds_for()
+        for seed in cell_seeds
     )
     return Cell(setting, env, agent, jobs, paper, paper_note, evaluation, key, why, part)
+
+
+def _seed_tuple(values: Any, what: str) -> tuple[int, ...]:
+    """``values`` as distinct non-negative integer seeds, or a ``ValueError`` naming ``what``."""
+    if not isinstance(values, list | tuple) or not values:
+        raise ValueError(f"paper.yaml: {what} must be a non-empty list of seeds, got {values!r}")
+    if any(isinstance(v, bool) or not isinstance(v, int) or v < 0 for v in values) or len(set(values)) != len(values):
+        raise ValueError(f"paper.yaml: {what} must be distinct non-negative integers, got {values!r}")
+    return tuple(values)
 
 
 def table_part(context: Context, experiment: str, name: str, cells: Sequence[Cell]) -> Part:

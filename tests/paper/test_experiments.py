@@ -15,7 +15,7 @@ from eval.digest import class_defaults, env_inverse_dynamics_defaults, neutral_s
 from eval.jobs import Job, JobResult
 from eval.paper.experiments import EXPERIMENTS, build_parts, make_context, select_parts
 from eval.paper.figures.common import figure_complete
-from eval.paper.parts import SCALES, Part
+from eval.paper.parts import SCALES, Part, make_cell
 from eval.paper.runner import run_parts, unique_jobs
 from eval.pretraining import dataset_path, repeat_transitions
 from eval.provenance import completed_result, defaults_digest, job_fingerprint, read_provenance, read_sessions
@@ -35,7 +35,7 @@ def test_every_experiment_builds_with_the_paper_budgets(tmp_path):
     parts = paper_parts(tmp_path)
     assert {part.experiment for part in parts} == set(EXPERIMENTS)
     for job in unique_jobs(parts):  # also: no run folder gets two configurations
-        assert job.eval_episodes == 10 and job.seed in (0, 1, 2)
+        assert job.eval_episodes == 10 and job.seed in (0, 1, 2, 3, 4)
         if job.mode == "pretrained":
             assert job.timesteps == 100_000
         elif job.mode == "untrained":
@@ -44,8 +44,8 @@ def test_every_experiment_builds_with_the_paper_budgets(tmp_path):
             assert job.timesteps == 50_000
     for part in parts:
         assert part.seeds == ((0, 1, 2, 3) if part.figure == "sawyer_exploration" else (0, 1, 2))
-        for cell in part.cells:
-            assert len(cell.jobs) == 3
+        for cell in part.cells:  # the follow rows of beyond_maze name 5 seeds of their own
+            assert len(cell.jobs) == (5 if "follow" in (cell.key or "") else 3)
 
 
 def test_paper_numbers_sit_beside_the_cells(tmp_path):
@@ -146,6 +146,35 @@ def test_smoke_runs_live_apart_from_paper_runs(tmp_path):
     assert all(job.run_dir.relative_to(tmp_path).parts[0] == "smoke" for p in smoke for job in p.jobs)
     assert not {j.run_dir for p in smoke for j in p.jobs} & {j.run_dir for p in paper for j in p.jobs}
     assert SCALES["smoke"].online < 100 and smoke[0].command().endswith("--scale smoke")
+
+
+def test_a_cell_can_name_its_own_seeds_per_scale(tmp_path):
+    """The follow rows of beyond_maze run 5 seeds at the paper's scale, the scale's seeds elsewhere; --seeds wins."""
+    paper = select_parts(paper_parts(tmp_path, ["beyond_maze"]), ["beyond_maze/online"])[0]
+    seeds = {cell.key: [job.seed for job in cell.jobs] for cell in paper.cells}
+    assert seeds["explore_follow"] == seeds["explore_real_follow_pair3"] == [0, 1, 2, 3, 4]
+    assert seeds["explore_anneal"] == [0, 1, 2]
+    assert paper.seeds == (0, 1, 2) and "--seeds" not in paper.command()
+    smoke = select_parts(build_parts(["beyond_maze"], make_context("smoke", str(tmp_path))), ["beyond_maze/online"])[0]
+    assert {len(cell.jobs) for cell in smoke.cells} == {1}
+    chosen = select_parts(build_parts(["beyond_maze"], make_context("paper", str(tmp_path), [3])), ["beyond_maze/online"])
+    assert {job.seed for job in chosen[0].jobs} == {3}
+
+
+@pytest.mark.parametrize(
+    ("seeds", "message"),
+    [
+        ({"papr": [0, 1]}, "unknown scales \\['papr'\\]"),
+        ({"paper": []}, "non-empty list of seeds"),
+        ({"paper": [0, 0]}, "distinct non-negative integers"),
+        ({"paper": [-1]}, "distinct non-negative integers"),
+        ({"paper": 5}, "non-empty list of seeds"),
+    ],
+)
+def test_bad_cell_seeds_name_the_cell(tmp_path, seeds, message):
+    context = make_context("paper", str(tmp_path))
+    with pytest.raises(ValueError, match=message):
+        make_cell(context, "a row", "particle", "ebm", "v", seeds=seeds, part="p/q")
 
 
 # ------------------------------------------------------------------------------------------------ pretrained jobs
