@@ -124,6 +124,10 @@ class GraphSubgoals:
         None: the nodes themselves (the cell centres). A cell that overlaps a wall can have its centre inside the
         wall; a plan aimed there presses against the wall for its whole length. A state the agent was at is one it
         can be at again.
+    :param period: [D] the period of each periodic state dim, 0 for the others (Reacher's normalised angles: 2 for its
+        two angle dims, the agent's ``goal_spec.goal_period``), or None: no dim is periodic. A periodic dim's cells
+        tile its circle (a whole number of cells of side at most ``cell`` steps), so that states on either side of
+        the wrap fall in neighbouring cells, and every gap and move is taken the short way round.
     """
 
     nodes: np.ndarray
@@ -141,6 +145,9 @@ class GraphSubgoals:
     aims: np.ndarray | None = field(default=None, repr=False)
     stall_penalty: float | None = None
     direct_when_nearer: bool = False
+    period: np.ndarray | None = None
+    _side: np.ndarray = field(init=False, repr=False)  # [D] the cells' side
+    _around: np.ndarray = field(init=False, repr=False)  # [D] cells around each periodic dim, 0 for the others
     _tree: cKDTree = field(init=False, repr=False)
     _move_tree: cKDTree | None = field(default=None, init=False, repr=False)
     _node_of_cell: dict[tuple[int, ...], int] = field(init=False, repr=False)  # the visited cells -> their nodes
@@ -148,14 +155,15 @@ class GraphSubgoals:
     _last: dict[int, tuple[np.ndarray, int]] = field(default_factory=dict, init=False, repr=False)  # row -> (state, stalls)
 
     def __post_init__(self) -> None:
-        self._tree = cKDTree(self.nodes / self.step)  # Chebyshev queries in units of one step
+        self._side, self._around = _grid(self.step, self.cell, self.period)
+        self._tree = self._step_tree(self.nodes)  # Chebyshev queries in units of one step
         self._node_of_cell = {cell: i for i, cell in enumerate(map(tuple, self._cell_of(self.nodes).tolist()))}
         if self.unstick not in UNSTICK:
             raise ValueError(f"unstick must be one of {UNSTICK}, got {self.unstick!r}.")
         if self.unstick == "real_move":
             if self.move_starts is None or self.move_ends is None or len(self.move_starts) == 0:
                 raise ValueError("unstick='real_move' needs the real transitions (move_starts, move_ends).")
-            self._move_tree = cKDTree(self.move_starts / self.step)
+            self._move_tree = self._step_tree(self.move_starts)
 
     @classmethod
     def from_transitions(
@@ -228,16 +236,25 @@ class GraphSubgoals:
         if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
             raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
         rng = np.random.default_rng(seed)
-        step = np.maximum(np.abs(next_states - states).max(axis=0), 1e-6)  # [D]
-        side = cell * step  # [D]
-        occupied, inverse = np.unique(np.floor(states / side).astype(np.int64), axis=0, return_inverse=True)  # [V, D]
-        aims = _visited_in_cells(states, inverse.reshape(-1), len(occupied)) if aim == "visited" else None  # [V, D]
+        period = _periods(agent, states.shape[1])  # [D] or None
+        step = np.maximum(np.abs(_wrap(next_states - states, period)).max(axis=0), 1e-6)  # [D]
+        side, around = _grid(step, cell, period)  # [D] each
+        cells = _cells(states, side, around)  # [M, D]
+        occupied, inverse = np.unique(cells, axis=0, return_inverse=True)  # [V, D]
+        centres = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
+        if period is not None:  # periodic dims' centres in [-period / 2, period / 2), as the env's angles
+            centres = _wrap(centres, period)
+        if aim == "visited":
+            aims = _visited_in_cells(states, inverse.reshape(-1), len(occupied), centres, period)  # [V, D]
+        else:
+            aims = None
         if len(occupied) > max_nodes:
             subset = np.sort(rng.choice(len(occupied), max_nodes, replace=False))
-            occupied = occupied[subset]
+            occupied, centres = occupied[subset], centres[subset]
             aims = None if aims is None else aims[subset]
-        nodes = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
-        pairs = cKDTree(occupied).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2] neighbouring cells
+        nodes = centres  # [V, D]
+        boxsize = around if period is not None else None  # periodic dims: their cells wrap round
+        pairs = cKDTree(occupied, boxsize=boxsize).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2]
         pairs = np.concatenate([pairs, pairs[:, ::-1]])  # both directions: feasibility is directional
         energy, threshold = None, float("inf")
         allowed = np.zeros((0, 2), dtype=np.int64)  # [E, 2]
@@ -247,12 +264,12 @@ class GraphSubgoals:
             threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
             allowed = pairs[energy(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]
         if edges in ("real", "both"):
-            real = _real_moves(occupied, states, next_states, side, real_hops)
+            real = _real_moves(occupied, states, next_states, side, real_hops, around)
             allowed = np.unique(np.concatenate([allowed, real]), axis=0)
         # An edge costs one move, plus ``clearance`` for entering a node that few allowed moves leave (one beside a
         # wall, or at the edge of what was visited): paths keep to the open, where the plans' moves are reliable.
         degree = np.bincount(allowed[:, 0], minlength=len(nodes))  # [V]
-        span = np.abs(occupied[allowed[:, 0]] - occupied[allowed[:, 1]]).max(axis=1, initial=1)  # [E] cells per edge
+        span = _cell_gaps(occupied[allowed[:, 0]] - occupied[allowed[:, 1]], around).max(axis=1, initial=1)  # [E]
         cost = span + clearance * (1.0 - degree[allowed[:, 1]] / max(int(degree.max(initial=0)), 1))  # [E]
         graph = csr_matrix((cost, (allowed[:, 0], allowed[:, 1])), shape=(len(nodes), len(nodes)))
         spec = agent.goal_spec
@@ -281,6 +298,7 @@ class GraphSubgoals:
             aims=aims,
             stall_penalty=stall_penalty,
             direct_when_nearer=bool(direct_when_nearer),
+            period=period,
         )
 
     @property
@@ -325,8 +343,37 @@ class GraphSubgoals:
 
     def _nearer_than(self, state: np.ndarray, goal: np.ndarray, node: int) -> bool:
         """Whether ``state`` is nearer ``goal`` than ``node`` is (max over the goal dims, in real steps)."""
-        dims, scale = self.goal_indices, self.step[self.goal_indices]
-        return bool((np.abs(state[dims] - goal) / scale).max() < (np.abs(self.nodes[node, dims] - goal) / scale).max())
+        here, there = self._goal_gaps(state[None], goal)[0], self._goal_gaps(self.nodes[node][None], goal)[0]  # [G]
+        return bool(here.max() < there.max())
+
+    def _goal_gaps(self, points: np.ndarray, goal: np.ndarray) -> np.ndarray:
+        """[K, D] points -> [K, G] their distance to ``goal`` [G] in each goal dim, in real steps (the short way round
+        a periodic dim)."""
+        dims = self.goal_indices
+        period = None if self.period is None else self.period[dims]
+        return np.abs(_wrap(points[:, dims] - goal, period)) / self.step[dims]
+
+    def _step_tree(self, points: np.ndarray) -> cKDTree:
+        """A k-d tree over [K, D] points in units of one real step, periodic dims on their circle."""
+        if self.period is None:
+            return cKDTree(points / self.step)
+        return cKDTree(self._in_box(points), boxsize=np.where(self.period > 0, self.period / self.step, 0.0))
+
+    def _in_box(self, points: np.ndarray) -> np.ndarray:
+        """[K, D] points in units of one real step, as :meth:`_step_tree` holds them (periodic dims in [0, period))."""
+        scaled = points / self.step  # [K, D]
+        if self.period is None:
+            return scaled
+        box = self.period / self.step  # [D]
+        periodic = self.period > 0
+        scaled[..., periodic] = np.mod(scaled[..., periodic], box[periodic])
+        scaled[..., periodic] = np.where(scaled[..., periodic] >= box[periodic], 0.0, scaled[..., periodic])  # float edge
+        return scaled
+
+    def _nearest_nodes(self, state: np.ndarray, k: int) -> np.ndarray:
+        """The ``k`` nodes nearest ``state`` [D] (Chebyshev, in real steps), nearest first."""
+        _, near = self._tree.query(self._in_box(state[None])[0], k=min(k, len(self.nodes)), p=np.inf)
+        return np.atleast_1d(near)
 
     def _aim(self, node: int) -> np.ndarray:
         """Where a subgoal at ``node`` sits ([D]): its visited state with ``aims``, else the node (its cell's centre)."""
@@ -349,7 +396,9 @@ class GraphSubgoals:
         if self.patience is None:
             return False
         last = self._last.get(row)
-        stalls = last[1] + 1 if last is not None and np.all(np.abs(state - last[0]) < 0.25 * self.step) else 0
+        stalls = 0
+        if last is not None and np.all(np.abs(_wrap(state - last[0], self.period)) < 0.25 * self.step):
+            stalls = last[1] + 1
         self._last[row] = (state.copy(), stalls)
         return stalls >= self.patience
 
@@ -359,27 +408,28 @@ class GraphSubgoals:
         at the first stalled call, the next nearest at the next (a move across a wall's corner from a state on its
         other side fails from here). None where no such move was made."""
         assert self._move_tree is not None and self.move_starts is not None and self.move_ends is not None
-        near = np.asarray(self._move_tree.query_ball_point(state / self.step, r=0.5, p=np.inf), dtype=np.int64)  # [K]
+        here = self._in_box(state[None])[0]
+        near = np.asarray(self._move_tree.query_ball_point(here, r=0.5, p=np.inf), dtype=np.int64)  # [K]
         if len(near) == 0:
             return None
         cells = map(tuple, self._cell_of(self.move_ends[near]).tolist())
         cost = np.array([distance[self._node_of_cell[c]] if c in self._node_of_cell else np.inf for c in cells])  # [K]
-        moved = (np.abs(self.move_ends[near] - self.move_starts[near]) / self.step).max(axis=1) >= 0.25  # [K]
-        better = near[(cost < distance[node]) & moved]  # [B] moves that went somewhere and got closer
-        if len(better) == 0:
+        displacement = _wrap(self.move_ends[near] - self.move_starts[near], self.period)  # [K, D]
+        moved = (np.abs(displacement) / self.step).max(axis=1) >= 0.25  # [K]
+        better = (cost < distance[node]) & moved  # [K] moves that went somewhere and got closer
+        if not better.any():
             return None
-        gaps = np.abs(self.move_starts[better] - state) / self.step  # [B, D]
-        order = better[np.argsort(gaps.max(axis=1), kind="stable")]  # nearest start first
+        gaps = np.abs(_wrap(self.move_starts[near[better]] - state, self.period)) / self.step  # [B, D]
+        order = np.flatnonzero(better)[np.argsort(gaps.max(axis=1), kind="stable")]  # nearest start first
         tries = self._last[row][1] - (self.patience or 0)  # stalled calls so far beyond the patience
-        move = order[tries % len(order)]
-        return state + (self.move_ends[move] - self.move_starts[move])
+        return state + displacement[order[tries % len(order)]]
 
     def _in_sight(self, state: np.ndarray, path: list[int]) -> int:
         """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` stays in
         visited cells and, with an energy, the energy allows."""
         for node in reversed(path[1:]):
-            segment = self._aim(node) - state  # [D]
-            moves = max(int(np.ceil(np.abs(segment / (self.cell * self.step)).max())), 1)
+            segment = _wrap(self._aim(node) - state, self.period)  # [D] the short way round a periodic dim
+            moves = max(int(np.ceil(np.abs(segment / self._side).max())), 1)
             points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
             if not all(cell in self._node_of_cell for cell in map(tuple, self._cell_of(points[1:]).tolist())):
                 continue  # the segment leaves the visited cells (into a wall, or where nothing was seen)
@@ -408,13 +458,12 @@ class GraphSubgoals:
         return self.nodes[path]
 
     def _cell_of(self, points: np.ndarray) -> np.ndarray:
-        """[K, D] points -> [K, D] the integer indices of their grid cells."""
-        return np.floor(points / (self.cell * self.step)).astype(np.int64)
+        """[K, D] points -> [K, D] the integer indices of their grid cells (periodic dims modulo their cells)."""
+        return _cells(points, self._side, self._around)
 
     def _goal_node(self, goal: np.ndarray) -> int:
         """The node nearest the goal in the goal dims."""
-        gaps = np.abs(self.nodes[:, self.goal_indices] - goal) / self.step[self.goal_indices]  # [V, G]
-        return int(np.argmin(gaps.max(axis=1)))
+        return int(np.argmin(self._goal_gaps(self.nodes, goal).max(axis=1)))
 
     def _paths_to(self, target: int) -> tuple[np.ndarray, np.ndarray]:
         """The path cost from every node to ``target`` and each node's next node on its path (cached per target)."""
@@ -425,8 +474,7 @@ class GraphSubgoals:
 
     def _start_node(self, state: np.ndarray, distance: np.ndarray, candidates: int = 8) -> int | None:
         """The node nearest the state that has a path to the target (among the ``candidates`` nearest)."""
-        _, near = self._tree.query(state / self.step, k=min(candidates, len(self.nodes)), p=np.inf)
-        for node in np.atleast_1d(near):
+        for node in self._nearest_nodes(state, candidates):
             if np.isfinite(distance[int(node)]):
                 return int(node)
         return None
@@ -478,13 +526,16 @@ class FrontierSubgoals:
     def __post_init__(self) -> None:
         graph = self.graph
         node_cells = graph._cell_of(graph.nodes)  # [V, D]
-        side = graph.cell * graph.step  # [D]
+        side, around = graph._side, graph._around  # [D] each
+        periodic = around > 0  # [D]
         nodes, points, pushes, cells = [], [], [], []
         for index, cell in enumerate(node_cells):
             for dim in range(len(cell)):
                 for sign in (-1, 1):
                     beyond = cell[None].repeat(self.depth, axis=0)  # [depth, D] the next cells that way
                     beyond[:, dim] += sign * np.arange(1, self.depth + 1)
+                    if periodic[dim]:
+                        beyond[:, dim] %= around[dim]
                     if not any(tuple(other) in graph._node_of_cell for other in beyond.tolist()):
                         neighbour = beyond[0]
                         nodes.append(index)
@@ -495,7 +546,7 @@ class FrontierSubgoals:
                         cells.append(tuple(cell.tolist()))
         dim = graph.nodes.shape[1]
         self._frontier_nodes = np.asarray(nodes, dtype=np.int64)
-        self._frontier_points = np.asarray(points, dtype=np.float32).reshape(-1, dim)
+        self._frontier_points = _wrap(np.asarray(points, dtype=np.float32).reshape(-1, dim), graph.period)
         self._frontier_push = np.asarray(pushes, dtype=np.float32).reshape(-1, dim)
         self._frontier_cells = cells
 
@@ -531,7 +582,8 @@ class FrontierSubgoals:
         """Whether a node lies within one cell of the goal (in the goal dims)."""
         graph = self.graph
         dims = graph.goal_indices
-        gaps = np.abs(graph.nodes[:, dims] - goal) / (graph.cell * graph.step[dims])  # [V, G] in cells
+        period = None if graph.period is None else graph.period[dims]
+        gaps = np.abs(_wrap(graph.nodes[:, dims] - goal, period)) / graph._side[dims]  # [V, G] in cells
         return bool((gaps.max(axis=1) <= 1.0).any())
 
     def _frontier_subgoal(self, state: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
@@ -539,11 +591,10 @@ class FrontierSubgoals:
         graph = self.graph
         if self.num_frontiers == 0:
             return None
-        _, near = graph._tree.query(state / graph.step, k=1, p=np.inf)
-        start = int(near)
+        start = int(graph._nearest_nodes(state, 1)[0])
         distance, predecessors = dijkstra(graph.graph, indices=start, return_predecessors=True)  # [V] each
         dims = graph.goal_indices
-        moves_left = np.linalg.norm((self._frontier_points[:, dims] - goal) / graph.step[dims], axis=1)  # [F]
+        moves_left = np.linalg.norm(graph._goal_gaps(self._frontier_points, goal), axis=1)  # [F]
         tried = np.array([self.plan_counts.get(cell, 0) for cell in self._frontier_cells], dtype=np.float64)  # [F]
         cost = distance[self._frontier_nodes] + self.goal_heuristic * moves_left + self.revisit_cost * tried
         best = int(np.argmin(cost))
@@ -565,26 +616,101 @@ class FrontierSubgoals:
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
 
 
-def _visited_in_cells(states: np.ndarray, cell_of_state: np.ndarray, num_cells: int) -> np.ndarray:
+def _periods(agent: Any, dims: int) -> np.ndarray | None:
+    """[D] the period of each state dim of ``agent``'s states (0: not periodic), or None where none is: the goal dims
+    when its ``goal_spec`` has a ``goal_period`` (the convention of the agent's costs and energy)."""
+    spec: Any = agent.goal_spec
+    period = getattr(spec, "goal_period", None)
+    if period is None:
+        return None
+    periods = np.zeros(dims, dtype=np.float32)
+    periods[np.asarray(spec.goal_indices)] = float(period)
+    return periods
+
+
+def _wrap(difference: np.ndarray, period: np.ndarray | None) -> np.ndarray:
+    """[..., D] differences with each periodic dim (``period`` > 0) taken the short way round, in [-p/2, p/2); the
+    array itself where ``period`` is None."""
+    if period is None:
+        return difference
+    periodic = period > 0
+    out = np.array(difference, copy=True)
+    half = 0.5 * period[periodic]
+    out[..., periodic] = np.mod(out[..., periodic] + half, period[periodic]) - half
+    return out
+
+
+def _grid(step: np.ndarray, cell: float, period: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The cells' side [D] (``cell`` real steps; on a periodic dim the largest side at most that which divides the
+    period) and the number of cells around each periodic dim ([D], 0 for the others)."""
+    side = cell * step  # [D]
+    around = np.zeros(len(step), dtype=np.int64)  # [D]
+    if period is not None:
+        periodic = period > 0
+        around[periodic] = np.ceil(period[periodic] / side[periodic]).astype(np.int64)
+        side = side.copy()
+        side[periodic] = (period[periodic] / around[periodic]).astype(side.dtype)
+    return side, around
+
+
+def _cells(points: np.ndarray, side: np.ndarray, around: np.ndarray) -> np.ndarray:
+    """[K, D] points -> [K, D] integer cell indices (periodic dims, ``around`` > 0, modulo their cells)."""
+    cells = np.floor(points / side).astype(np.int64)  # [K, D]
+    periodic = around > 0
+    if periodic.any():
+        cells[..., periodic] = np.mod(cells[..., periodic], around[periodic])
+    return cells
+
+
+def _cell_gaps(difference: np.ndarray, around: np.ndarray) -> np.ndarray:
+    """[..., D] differences of cell indices -> their size in cells (the short way round a periodic dim)."""
+    gaps = np.abs(difference)
+    periodic = around > 0
+    if periodic.any():
+        gaps[..., periodic] = np.minimum(gaps[..., periodic], around[periodic] - gaps[..., periodic])
+    return gaps
+
+
+def _visited_in_cells(
+    states: np.ndarray,
+    cell_of_state: np.ndarray,
+    num_cells: int,
+    centres: np.ndarray | None = None,
+    period: np.ndarray | None = None,
+) -> np.ndarray:
     """For each cell, the state in it nearest (max over dims) the mean of the states in it.
 
     :param states: [M, D] states.
     :param cell_of_state: [M] the index of each state's cell (every cell holds at least one state).
     :param num_cells: V, the number of cells.
+    :param centres: [V, D] the cells' centres (needed with ``period``).
+    :param period: [D] periods (0: not periodic) or None: a cell on a periodic dim can hold states from either side
+        of the wrap, so their mean is taken as offsets from the cell's centre, the short way round.
     :return: [V, D] one visited state per cell.
     """
     counts = np.bincount(cell_of_state, minlength=num_cells)  # [V]
     sums = np.zeros((num_cells, states.shape[1]), dtype=np.float64)  # [V, D]
-    np.add.at(sums, cell_of_state, states)
-    means = sums / counts[:, None]  # [V, D]
-    gap = np.abs(states - means[cell_of_state]).max(axis=1)  # [M]
+    if period is None:
+        np.add.at(sums, cell_of_state, states)
+        means = sums / counts[:, None]  # [V, D]
+        gap = np.abs(states - means[cell_of_state]).max(axis=1)  # [M]
+    else:
+        assert centres is not None, "periodic dims need the cells' centres"
+        np.add.at(sums, cell_of_state, _wrap(states - centres[cell_of_state], period))
+        offsets = sums / counts[:, None]  # [V, D] the mean offset from each centre
+        gap = np.abs(_wrap(states - centres[cell_of_state] - offsets[cell_of_state], period)).max(axis=1)  # [M]
     order = np.lexsort((gap, cell_of_state))  # by cell, nearest the mean first
     first = order[np.concatenate([[0], np.flatnonzero(np.diff(cell_of_state[order])) + 1])]  # [V]
     return states[first].astype(np.float32)
 
 
 def _real_moves(
-    occupied: np.ndarray, states: np.ndarray, next_states: np.ndarray, side: np.ndarray, hops: int = 1
+    occupied: np.ndarray,
+    states: np.ndarray,
+    next_states: np.ndarray,
+    side: np.ndarray,
+    hops: int = 1,
+    around: np.ndarray | None = None,
 ) -> np.ndarray:
     """The moves between nodes at most ``hops`` cells apart that real transitions made.
 
@@ -593,14 +719,16 @@ def _real_moves(
     :param next_states: [M, D] their real next states.
     :param side: [D] the cells' side.
     :param hops: the most cells (per dim) between the two ends' cells.
+    :param around: [D] cells around each periodic dim (0 for the others), or None: none periodic.
     :return: [E, 2] (from, to) node indices of the distinct moves from a cell to another at most ``hops`` away (a
         transition that stayed in its cell, jumped further, or left the nodes, e.g. those a ``max_nodes`` cap dropped,
         gives none).
     """
     index = {cell: i for i, cell in enumerate(map(tuple, occupied.tolist()))}
-    start = np.floor(states / side).astype(np.int64)  # [M, D]
-    end = np.floor(next_states / side).astype(np.int64)  # [M, D]
-    span = np.abs(end - start).max(axis=1)  # [M]
+    around = np.zeros(occupied.shape[1], dtype=np.int64) if around is None else around
+    start = _cells(states, side, around)  # [M, D]
+    end = _cells(next_states, side, around)  # [M, D]
+    span = _cell_gaps(end - start, around).max(axis=1)  # [M]
     hop = (span >= 1) & (span <= hops)  # [M] to another cell, near enough
     moves = np.unique(np.concatenate([start[hop], end[hop]], axis=1), axis=0)  # [K, 2 D] distinct cell pairs
     dim = occupied.shape[1]

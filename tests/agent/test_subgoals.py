@@ -435,3 +435,73 @@ def test_direct_when_nearer_plans_straight_at_a_goal_past_the_graph():
     assert not np.allclose(follow.subgoals(past, goal), goal)  # back to the graph's node nearest the goal
     assert np.allclose(direct.subgoals(past, goal), goal)
     assert np.array_equal(direct.subgoals(behind, goal), follow.subgoals(behind, goal))
+
+
+# ------------------------------------------------------------------------------------------------ periodic dims
+def _torus_walk(seed: int = 0, steps: int = 20_000) -> tuple[np.ndarray, np.ndarray]:
+    """Random moves of at most 0.05 per axis on the torus [-1, 1)^2 (both dims periodic, period 2)."""
+    rng = np.random.default_rng(seed)
+    states = rng.uniform(-1, 1, size=(steps, 2)).astype(np.float32)
+    moves = rng.uniform(-0.05, 0.05, size=states.shape).astype(np.float32)
+    return states, (np.mod(states + moves + 1.0, 2.0) - 1.0).astype(np.float32)
+
+
+def _periodic_agent() -> SimpleNamespace:
+    """An energy-free agent whose two goal dims are periodic angles (as Reacher's: period 2)."""
+    return SimpleNamespace(horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1], goal_period=2.0))
+
+
+def test_a_periodic_dim_wraps_its_cells_steps_and_paths():
+    states, following = _torus_walk()
+    graph = GraphSubgoals.from_transitions(_periodic_agent(), states, following, edges="real")
+    np.testing.assert_allclose(graph.step, 0.05, atol=1e-3)  # the wrapped moves, not the 2.0 jump across the wrap
+    cells = graph._cell_of(graph.nodes)
+    assert cells.min() == 0 and np.all(cells.max(axis=0) == graph._around - 1)  # the cells tile each circle
+    np.testing.assert_allclose(graph._around * graph._side, 2.0, rtol=1e-6)
+    start, goal = np.array([-0.9, 0.0], np.float32), np.array([0.9, 0.0], np.float32)
+    path = graph.path(start, goal)  # 0.2 apart across the wrap, 1.8 the other way
+    assert 0 < len(path) <= 15 and np.all(np.abs(path) <= 1.0)  # 0.2 is 6 cells; 1.8 would be 49
+    hops = np.abs(np.mod(np.diff(path, axis=0) + 1.0, 2.0) - 1.0).max(axis=1)
+    assert hops.max() <= 0.05 + 1e-5  # each edge one move, the short way round
+    subgoal = graph.subgoals(start[None], goal[None])[0]
+    gap = np.abs(np.mod(subgoal - goal + 1.0, 2.0) - 1.0)
+    assert gap[0] < 0.2  # across the wrap, towards the goal
+    # Without the period the same states make a graph whose steps span the circle (a move across the wrap is 2 long).
+    flat = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    assert flat.step.max() > 1.9
+
+
+def test_the_wrap_is_no_frontier_and_a_visited_aim_sits_on_its_side_of_the_wrap():
+    states, following = _torus_walk()
+    keep = np.abs(states[:, 0]) > 0.5  # a band across the wrap: x in [-1, -0.5) and (0.5, 1)
+    graph = GraphSubgoals.from_transitions(_periodic_agent(), states[keep], following[keep], edges="real", aim="visited")
+    frontier = FrontierSubgoals(graph, goal_heuristic=0.0)
+    assert frontier.num_frontiers > 0
+    assert np.all(np.abs(np.abs(frontier._frontier_points[:, 0]) - 0.5) < 0.2)  # only at the band's open sides
+    assert graph.aims is not None
+    gaps = np.abs(np.mod(graph.aims - graph.nodes + 1.0, 2.0) - 1.0)  # [V, 2] aim to its cell's centre
+    assert gaps.max() <= 0.5 * graph._side.max() + 1e-5  # in its own cell, not averaged across the wrap
+
+
+@pytest.mark.parametrize("env_id", ["ebm/Particle-v0", "ebm/Maze-v0", "ebm/Reacher-v0", "ebm/SawyerReach-v0"])
+def test_graph_subgoals_and_exploration_run_on_every_env(env_id):
+    env = gym.make(env_id)
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy",
+        env,
+        seed=0,
+        planner_config={"num_samples": 8, "iterations": 2},
+        explore={"every": 30},
+        subgoal_graph={"quantile": 0.99, "patience": 2, "edges": "both", "unstick": "real_move", "aim": "visited"},
+        image_log_interval=0,
+    )
+    agent.learn(90)
+    assert isinstance(agent.subgoals, GraphSubgoals) and len(agent.subgoals.nodes) > 0
+    periodic = getattr(agent.goal_spec, "goal_period", None) is not None
+    assert (agent.subgoals.period is not None) == periodic  # only Reacher's angles wrap
+    obs, _ = env.reset(seed=1)
+    state = None
+    for _ in range(5):
+        action, state = agent.predict(obs, state=state, deterministic=True)
+        assert env.action_space.contains(action)
+        obs, *_ = env.step(action)
