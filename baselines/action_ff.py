@@ -363,6 +363,8 @@ class ActionFFAgent(PlannerAgentBase):
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
         positives = self._replay_positives(self._fresh_positives(segments))
         assert positives.actions is not None
+        if not self.online.train_every_plan:
+            return {}  # the untrained control: the buffer fills, the model stays as initialised
         return self._mse_step(positives.states, positives.next_states, positives.actions)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:

@@ -385,9 +385,11 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
         hard, num_failed = self._hard_negatives(segments) if self.online.hard_negatives else (None, 0)
         l2_coeff = self.scheduled_l2_coeff()
-        stats = self._gradient_step(
-            positives.states, positives.next_states, neg_states, neg_next, hard=hard, l2_coeff=l2_coeff
-        )
+        stats: dict[str, float] = {}
+        if self.online.train_every_plan:
+            stats = self._gradient_step(
+                positives.states, positives.next_states, neg_states, neg_next, hard=hard, l2_coeff=l2_coeff
+            )
         if self.online.l2_final is not None:
             stats["l2_coeff"] = l2_coeff
         if self.online.hard_negatives:
@@ -399,7 +401,8 @@ class EBMPlannerAgent(PlannerAgentBase):
                     for k, v in self.inverse_model.update(positives.states, positives.next_states, positives.actions).items()
                 }
             )
-        self._adapt_iterations(stats["energy_neg"] - stats["energy_pos"])
+        if "energy_neg" in stats:
+            self._adapt_iterations(stats["energy_neg"] - stats["energy_pos"])
         if self.image_log_interval and self._n_updates % self.image_log_interval == 0:
             self._log_images(segments[0])
         return stats

@@ -51,7 +51,10 @@ class OnlineConfig:
     :param adapt_increment: iterations added per growth.
     :param max_iterations: cap on the planner's iterations.
     :param reinit_energy: re-initialise (instead of warm-start) a plan whose mean transition energy exceeds this.
-    :param train_every_plan: take one gradient step per finished plan segment (Algorithm 1).
+    :param train_every_plan: take one gradient step per finished plan segment (Algorithm 1). False: none, while the
+        replay buffers (and with them a subgoal graph built from them) and a learned inverse dynamics still grow: the
+        model stays as initialised, the untrained control of an online configuration (what its planning, exploration
+        and graph do with an energy that learned nothing).
     :param hard_negatives: keep the failed plan steps as labelled negatives (issue #34; EBM agent only, off by
         default). A step fails when the real next state s'_real misses the planned one s'_plan by more than
         ``hard_negative_threshold`` (max over the model dims): the agent aimed from the real s_t at s'_plan (with

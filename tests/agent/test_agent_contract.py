@@ -277,3 +277,24 @@ def test_tensorboard_plan_image_for_2d_states(tmp_path):
     accumulator = EventAccumulator(glob.glob(str(tmp_path / "*"))[0])
     accumulator.Reload()
     assert "plan/energy_map" in accumulator.Tags()["images"]
+
+
+@pytest.mark.parametrize("agent_class", AGENTS)
+def test_train_every_plan_false_fills_the_buffer_and_leaves_the_model_as_initialised(agent_class):
+    """The untrained control of an online configuration: the same loop, no gradient step on the model."""
+    import torch
+
+    def weights(agent):
+        return [p.detach().clone() for p in agent.policy.parameters()]
+
+    frozen = make_agent(
+        agent_class, gym.make("ebm/Particle-v0"), online={**FAST_KWARGS[agent_class]["online"], "train_every_plan": False}
+    )
+    trained = make_agent(agent_class, gym.make("ebm/Particle-v0"))
+    before = weights(frozen)
+    assert all(torch.equal(a, b) for a, b in zip(before, weights(trained)))  # same seed: same initial model
+    frozen.learn(60)
+    trained.learn(60)
+    assert len(frozen.pos_buffer) == len(trained.pos_buffer) > 0
+    assert all(torch.equal(a, b) for a, b in zip(before, weights(frozen)))
+    assert not all(torch.equal(a, b) for a, b in zip(before, weights(trained)))
