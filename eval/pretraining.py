@@ -63,6 +63,10 @@ OFFLINE_DEFAULTS: dict[str, int] = {"epochs": 10, "batch_size": 256}
 SEQUENTIAL_DEFAULTS: dict[str, int] = {"epochs": 1, "batch_size": 256, "repeat": 100}
 """The sequential ablation: each transition 100 times in a row (the paper), one pass over the repeated data."""
 
+EBM_OFFLINE_KEYS: frozenset[str] = frozenset({"num_candidates"})
+"""``learn_offline`` settings a pretrained EBM job may also set (``EBMPlannerAgent.learn_offline``'s own keywords;
+left out, the agent's defaults)."""
+
 COLLECT_CHECKPOINT_EVERY = 10_000
 """Transitions between two checkpoints of a directed collection (on the Sawyer 12-20 min of one core; 18.7 and about
 20 min measured on 2026-12-03 beside other processes)."""
@@ -97,6 +101,7 @@ def pretrain(model: BaseAlgorithm, job: Job) -> dict[str, Any]:
         batch_size=int(settings["batch_size"]),
         sequential=sequential,
         tb_log_name=job.tb_log_name,
+        **{key: settings[key] for key in sorted(EBM_OFFLINE_KEYS & set(settings))},
     )
     return {
         "dataset": job.dataset,
@@ -116,13 +121,18 @@ def offline_settings(job: Job) -> dict[str, Any]:
     """A pretrained job's ``learn_offline`` settings: its ``offline_kwargs`` over its dataset kind's defaults.
 
     :param job: the pretrained job.
-    :return: ``epochs``, ``batch_size`` and, for the sequential dataset, ``repeat``.
-    :raises ValueError: for ``offline_kwargs`` the dataset kind does not understand.
+    :return: ``epochs``, ``batch_size`` and, for the sequential dataset, ``repeat``; for an EBM job, any of
+        :data:`EBM_OFFLINE_KEYS` it sets.
+    :raises ValueError: for ``offline_kwargs`` the dataset kind or the agent does not understand.
     """
     defaults = SEQUENTIAL_DEFAULTS if job.dataset == "directed+sequential" else OFFLINE_DEFAULTS
-    unknown = sorted(set(job.offline_kwargs) - set(defaults))
+    known = set(defaults) | (EBM_OFFLINE_KEYS if job.agent == "ebm" else set())
+    unknown = sorted(set(job.offline_kwargs) - known)
     if unknown:
-        raise ValueError(f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r}; known: {sorted(defaults)}")
+        raise ValueError(
+            f"offline_kwargs {unknown} are not understood for dataset {job.dataset!r} and agent {job.agent!r}; known: "
+            f"{sorted(known)}"
+        )
     return {**defaults, **job.offline_kwargs}
 
 

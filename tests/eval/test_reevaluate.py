@@ -114,6 +114,10 @@ def test_offline_settings_and_training_data_follow_the_dataset_kind():
     assert offline_settings(job("directed+sequential", repeat=3))["repeat"] == 3
     with pytest.raises(ValueError, match=r"offline_kwargs \['repeat'\] are not understood"):
         offline_settings(job("random", repeat=3))
+    assert offline_settings(job("random", num_candidates=8))["num_candidates"] == 8  # an EBM's own keyword
+    ff = Job("ebm/Particle-v0", "action-ff", 0, 10, 10, 1, mode="pretrained", offline_kwargs={"num_candidates": 8})
+    with pytest.raises(ValueError, match=r"\['num_candidates'\] are not understood for dataset 'random' and agent"):
+        offline_settings(ff)
     zeros = np.zeros((4, 2), np.float32)
     base = TransitionDataset(zeros, zeros, zeros, np.arange(4))
     assert training_data(base, job("random")) is base
