@@ -418,7 +418,8 @@ def _exploration(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLooku
 
 def _no_loss(item: ComparisonSpec, scores: ScoreLookup, figures: FigureLookup, count: Retired) -> Comparison:
     new, old = item.cells
-    return compare_no_loss(item.label, f"{_name(new)} (fast preset)", scores(new), f"{_name(old)} (paper preset)", scores(old))
+    names = f"{_name(new)} ({new[2]})", f"{_name(old)} ({old[2]})"  # the cells' settings tell the two apart
+    return compare_no_loss(item.label, names[0], scores(new), names[1], scores(old))
 
 
 def per_seed_values(metrics: Mapping[str, Any], key: str) -> list[float] | None:
