@@ -23,6 +23,7 @@ from ebm_agent.costs import (
     RampedGoalEnergy,
     RewardGoalEnergy,
     VelocityPrior,
+    wrap_array,
 )
 from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
@@ -601,7 +602,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         moves = (next_states - states).astype(np.float64)  # [P, D]
         if spec.goal_period is not None:
             period, dims = spec.goal_period, spec.goal_indices
-            moves[:, dims] = np.mod(moves[:, dims] + 0.5 * period, period) - 0.5 * period
+            moves[:, dims] = wrap_array(moves[:, dims], period)
         update = np.stack([np.full(moves.shape[1], len(moves), dtype=np.float64), moves.sum(0), np.square(moves).sum(0)])
         self._move_stats = update if self._move_stats is None else self._move_stats + update
         count, total, squares = self._move_stats

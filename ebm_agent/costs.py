@@ -14,6 +14,7 @@ import re
 from collections.abc import Callable, Sequence
 from typing import Protocol, runtime_checkable
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -28,6 +29,7 @@ __all__ = [
     "RewardGoalEnergy",
     "TransitionEnergy",
     "VelocityPrior",
+    "wrap_array",
     "wrap_difference",
 ]
 
@@ -67,6 +69,27 @@ def wrap_difference(difference: Tensor, period: float | None) -> Tensor:
         return difference
     half = 0.5 * period
     return torch.remainder(difference + half, period) - half
+
+
+def wrap_array(difference: np.ndarray, period: float | np.ndarray | None) -> np.ndarray:
+    """The numpy twin of :func:`wrap_difference`: differences of periodic coordinates in [-period/2, period/2).
+
+    :param difference: [..., D] differences (e.g. s' - s).
+    :param period: one period for every coordinate given, or [D] a period per dim (0: that dim is not periodic), or
+        None for no wrapping.
+    :return: the wrapped differences, same shape (``difference`` itself where nothing wraps).
+    """
+    if period is None:
+        return difference
+    if np.ndim(period) == 0:
+        half = 0.5 * period
+        return np.mod(difference + half, period) - half
+    periods = np.asarray(period)
+    periodic = periods > 0  # [D]
+    out = np.array(difference, copy=True)
+    half = 0.5 * periods[periodic]
+    out[..., periodic] = np.mod(out[..., periodic] + half, periods[periodic]) - half
+    return out
 
 
 class _GoalTerm:

@@ -40,6 +40,7 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
+from ebm_agent.costs import wrap_array
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 
 __all__ = [
@@ -239,7 +240,7 @@ def next_state_rank(
     features = getattr(_energy_fn(agent), "features", None)
     if features is not None:  # periodic dims: the step across the wrap is the short way round
         dims, period = list(features.dims), features.period
-        steps[:, dims] = np.mod(steps[:, dims] + period / 2, period) - period / 2
+        steps[:, dims] = wrap_array(steps[:, dims], period)
     noise_std = scale * steps.std(axis=0)  # [D]
     rng = np.random.default_rng(seed)
     num, dim = states.shape

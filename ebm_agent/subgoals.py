@@ -35,6 +35,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 from stable_baselines3.common.callbacks import BaseCallback
 
+from ebm_agent.costs import wrap_array
 from ebm_agent.probe import transition_energies
 
 __all__ = [
@@ -237,13 +238,13 @@ class GraphSubgoals:
             raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
         rng = np.random.default_rng(seed)
         period = _periods(agent, states.shape[1])  # [D] or None
-        step = np.maximum(np.abs(_wrap(next_states - states, period)).max(axis=0), 1e-6)  # [D]
+        step = np.maximum(np.abs(wrap_array(next_states - states, period)).max(axis=0), 1e-6)  # [D]
         side, around = _grid(step, cell, period)  # [D] each
         cells = _cells(states, side, around)  # [M, D]
         occupied, inverse = np.unique(cells, axis=0, return_inverse=True)  # [V, D]
         centres = ((occupied + 0.5) * side).astype(np.float32)  # [V, D] cell centres: neighbours are one move apart
         if period is not None:  # periodic dims' centres in [-period / 2, period / 2), as the env's angles
-            centres = _wrap(centres, period)
+            centres = wrap_array(centres, period)
         if aim == "visited":
             aims = _visited_in_cells(states, inverse.reshape(-1), len(occupied), centres, period)  # [V, D]
         else:
@@ -351,7 +352,7 @@ class GraphSubgoals:
         a periodic dim)."""
         dims = self.goal_indices
         period = None if self.period is None else self.period[dims]
-        return np.abs(_wrap(points[:, dims] - goal, period)) / self.step[dims]
+        return np.abs(wrap_array(points[:, dims] - goal, period)) / self.step[dims]
 
     def _step_tree(self, points: np.ndarray) -> cKDTree:
         """A k-d tree over [K, D] points in units of one real step, periodic dims on their circle."""
@@ -397,7 +398,7 @@ class GraphSubgoals:
             return False
         last = self._last.get(row)
         stalls = 0
-        if last is not None and np.all(np.abs(_wrap(state - last[0], self.period)) < 0.25 * self.step):
+        if last is not None and np.all(np.abs(wrap_array(state - last[0], self.period)) < 0.25 * self.step):
             stalls = last[1] + 1
         self._last[row] = (state.copy(), stalls)
         return stalls >= self.patience
@@ -414,12 +415,12 @@ class GraphSubgoals:
             return None
         cells = map(tuple, self._cell_of(self.move_ends[near]).tolist())
         cost = np.array([distance[self._node_of_cell[c]] if c in self._node_of_cell else np.inf for c in cells])  # [K]
-        displacement = _wrap(self.move_ends[near] - self.move_starts[near], self.period)  # [K, D]
+        displacement = wrap_array(self.move_ends[near] - self.move_starts[near], self.period)  # [K, D]
         moved = (np.abs(displacement) / self.step).max(axis=1) >= 0.25  # [K]
         better = (cost < distance[node]) & moved  # [K] moves that went somewhere and got closer
         if not better.any():
             return None
-        gaps = np.abs(_wrap(self.move_starts[near[better]] - state, self.period)) / self.step  # [B, D]
+        gaps = np.abs(wrap_array(self.move_starts[near[better]] - state, self.period)) / self.step  # [B, D]
         order = np.flatnonzero(better)[np.argsort(gaps.max(axis=1), kind="stable")]  # nearest start first
         tries = self._last[row][1] - (self.patience or 0)  # stalled calls so far beyond the patience
         return state + displacement[order[tries % len(order)]]
@@ -428,7 +429,7 @@ class GraphSubgoals:
         """The farthest node of ``path`` (the first one at least) whose straight approach from ``state`` stays in
         visited cells and, with an energy, the energy allows."""
         for node in reversed(path[1:]):
-            segment = _wrap(self._aim(node) - state, self.period)  # [D] the short way round a periodic dim
+            segment = wrap_array(self._aim(node) - state, self.period)  # [D] the short way round a periodic dim
             moves = max(int(np.ceil(np.abs(segment / self._side).max())), 1)
             points = state + np.linspace(0.0, 1.0, 2 * moves + 1)[:, None] * segment  # [2 moves + 1, D]
             if not all(cell in self._node_of_cell for cell in map(tuple, self._cell_of(points[1:]).tolist())):
@@ -546,7 +547,7 @@ class FrontierSubgoals:
                         cells.append(tuple(cell.tolist()))
         dim = graph.nodes.shape[1]
         self._frontier_nodes = np.asarray(nodes, dtype=np.int64)
-        self._frontier_points = _wrap(np.asarray(points, dtype=np.float32).reshape(-1, dim), graph.period)
+        self._frontier_points = wrap_array(np.asarray(points, dtype=np.float32).reshape(-1, dim), graph.period)
         self._frontier_push = np.asarray(pushes, dtype=np.float32).reshape(-1, dim)
         self._frontier_cells = cells
 
@@ -583,7 +584,7 @@ class FrontierSubgoals:
         graph = self.graph
         dims = graph.goal_indices
         period = None if graph.period is None else graph.period[dims]
-        gaps = np.abs(_wrap(graph.nodes[:, dims] - goal, period)) / graph._side[dims]  # [V, G] in cells
+        gaps = np.abs(wrap_array(graph.nodes[:, dims] - goal, period)) / graph._side[dims]  # [V, G] in cells
         return bool((gaps.max(axis=1) <= 1.0).any())
 
     def _frontier_subgoal(self, state: np.ndarray, goal: np.ndarray) -> np.ndarray | None:
@@ -626,18 +627,6 @@ def _periods(agent: Any, dims: int) -> np.ndarray | None:
     periods = np.zeros(dims, dtype=np.float32)
     periods[np.asarray(spec.goal_indices)] = float(period)
     return periods
-
-
-def _wrap(difference: np.ndarray, period: np.ndarray | None) -> np.ndarray:
-    """[..., D] differences with each periodic dim (``period`` > 0) taken the short way round, in [-p/2, p/2); the
-    array itself where ``period`` is None."""
-    if period is None:
-        return difference
-    periodic = period > 0
-    out = np.array(difference, copy=True)
-    half = 0.5 * period[periodic]
-    out[..., periodic] = np.mod(out[..., periodic] + half, period[periodic]) - half
-    return out
 
 
 def _grid(step: np.ndarray, cell: float, period: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -696,9 +685,9 @@ def _visited_in_cells(
         gap = np.abs(states - means[cell_of_state]).max(axis=1)  # [M]
     else:
         assert centres is not None, "periodic dims need the cells' centres"
-        np.add.at(sums, cell_of_state, _wrap(states - centres[cell_of_state], period))
+        np.add.at(sums, cell_of_state, wrap_array(states - centres[cell_of_state], period))
         offsets = sums / counts[:, None]  # [V, D] the mean offset from each centre
-        gap = np.abs(_wrap(states - centres[cell_of_state] - offsets[cell_of_state], period)).max(axis=1)  # [M]
+        gap = np.abs(wrap_array(states - centres[cell_of_state] - offsets[cell_of_state], period)).max(axis=1)  # [M]
     order = np.lexsort((gap, cell_of_state))  # by cell, nearest the mean first
     first = order[np.concatenate([[0], np.flatnonzero(np.diff(cell_of_state[order])) + 1])]  # [V]
     return states[first].astype(np.float32)

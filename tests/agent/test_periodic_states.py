@@ -73,3 +73,17 @@ def test_action_ff_sees_the_same_circle_features_and_a_wrapped_error():
         fast = model.inference_evaluator()
         assert fast is not None
         torch.testing.assert_close(fast(states, actions), model(states, actions), atol=1e-5, rtol=1e-5)
+
+
+def test_wrap_array_is_the_numpy_twin_of_wrap_difference_and_wraps_only_periodic_dims():
+    from ebm_agent.costs import wrap_array, wrap_difference
+
+    rng = np.random.default_rng(0)
+    difference = rng.uniform(-5, 5, size=(64, 3)).astype(np.float32)  # [N, D]
+    expected = wrap_difference(torch.as_tensor(difference), 2.0).numpy()
+    np.testing.assert_allclose(wrap_array(difference, 2.0), expected, atol=1e-6)
+    per_dim = wrap_array(difference, np.array([2.0, 0.0, 2.0], np.float32))  # dim 1 is not periodic
+    np.testing.assert_allclose(per_dim[:, [0, 2]], expected[:, [0, 2]], atol=1e-6)
+    np.testing.assert_array_equal(per_dim[:, 1], difference[:, 1])
+    assert np.all((per_dim[:, [0, 2]] >= -1.0) & (per_dim[:, [0, 2]] < 1.0))
+    assert wrap_array(difference, None) is difference
