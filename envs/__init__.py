@@ -27,7 +27,42 @@ Every environment follows the same contract (what the agents rely on), on its *u
 
 from __future__ import annotations
 
+import contextlib
+import io
+import sys
+from collections.abc import Iterator
+
 from gymnasium.envs.registration import register, registry
+
+try:  # what Farama's packages print on import for some of their releases (a dependency of gymnasium)
+    from farama_notifications import notifications as _notifications
+except ImportError:  # pragma: no cover - gymnasium without it prints nothing either
+    _notifications = {}
+
+RELEASE_NOTICES: frozenset[str] = frozenset(
+    message for project in _notifications.values() for message in project.values() if isinstance(message, str)
+)
+"""The release notices that Farama's packages print to stderr when imported (gymnasium-robotics 1.2.1-1.4.2: that
+the Adroit envs' rewards changed, which concerns no env of ours): kept out of every command's output."""
+
+
+@contextlib.contextmanager
+def without_release_notices() -> Iterator[None]:
+    """Within the block, stderr lines that are exactly a Farama release notice are dropped; all else passes through.
+
+    :return: a context manager.
+    """
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(captured):
+            yield
+    finally:
+        kept = [line for line in captured.getvalue().splitlines(keepends=True) if line.strip() not in RELEASE_NOTICES]
+        sys.stderr.write("".join(kept))
+
+
+with without_release_notices():  # registers gymnasium-robotics' envs (FetchReach-v4, PointMaze_UMaze-v3, ...)
+    import gymnasium_robotics  # noqa: F401
 
 ENV_IDS: dict[str, str] = {
     "particle": "ebm/Particle-v0",

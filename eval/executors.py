@@ -22,7 +22,7 @@ from tqdm.auto import tqdm
 
 from eval.jobs import Job, JobResult, Runner
 from eval.run import run_job
-from eval.stop import install_worker_handlers, stop_at_next_step, stop_received
+from eval.stop import install_worker_handlers, stop_received, sweep_stop
 
 
 @runtime_checkable
@@ -106,11 +106,12 @@ class LocalExecutor:
             if self.jobs == 1:
                 self.limit_this_process()
                 results: list[JobResult] = []
-                for job in jobs:
-                    if any(result.status == "stopped" for result in results):  # a signal stopped the sweep
-                        results.append(_not_started(job))
-                    else:
-                        results.append(self._run_in_process(job, bar))
+                # A signal anywhere in the sweep (in a run, in its final evaluation, between runs) stops it: the run
+                # in progress finishes or writes its checkpoint, and no further run starts.
+                with sweep_stop() as stop:
+                    for job in jobs:
+                        stopped = stop.requested or any(result.status == "stopped" for result in results)
+                        results.append(_not_started(job) if stopped else self._run_in_process(job, bar))
                 return results
             return self._run_in_pool(jobs, bar)
 
@@ -148,7 +149,7 @@ class LocalExecutor:
                         with contextlib.suppress(ProcessLookupError):
                             os.kill(process.pid, signal.SIGTERM)
 
-            with stop_at_next_step(on_request=stop_workers, quiet=True):
+            with sweep_stop(on_request=stop_workers):
                 for future in as_completed(futures):
                     index = futures[future]
                     if future.cancelled():

@@ -9,7 +9,12 @@ in progress is finished first), writes the same checkpoint the run writes after 
 The job then ends with status ``"stopped"`` (:class:`RunStopped`), and the same command, run again, resumes from
 that step. A second signal stops the process at once, as without this module, leaving the last checkpoint written.
 
-Outside the block (building envs, offline training, final evaluations, figures) the signals keep their usual
+A sweep (``LocalExecutor.map``, ``eval.paper.runner.run_parts``) runs inside :func:`sweep_stop`: a stop request
+received anywhere in it (inside a run's ``learn``, during its final evaluation, between two runs) outlives the run
+it arrived in. The run in progress finishes or writes its checkpoint, no further run starts, and a later run's
+block starts with its flag already set, so that a second signal is taken as the second, not as a new first.
+
+Outside these blocks (building envs, offline training, figures) the signals keep their usual
 effect, except in the workers of ``LocalExecutor``'s pool, which remember them (:func:`install_worker_handlers`):
 there the job in progress finishes and no other starts. Handlers can be set only in a process's main thread;
 elsewhere (a Ray worker's task thread) the block does nothing and the signals keep their usual effect too.
@@ -55,6 +60,9 @@ _received: list[str] = []
 _worker = False
 """Whether this process is a pool worker (:func:`install_worker_handlers`)."""
 
+_sweeps: list[StopFlag] = []
+"""The flags of the :func:`sweep_stop` blocks open in this process, outermost first: every stop signal sets them."""
+
 
 def _handler(flag: StopFlag, on_request: Callable[[str], None] | None, message: str | None) -> Callable[[int, Any], None]:
     """A signal handler that sets ``flag`` on the first signal; a second one stops the process at once.
@@ -66,7 +74,11 @@ def _handler(flag: StopFlag, on_request: Callable[[str], None] | None, message: 
     def handler(signum: int, frame: Any) -> None:
         name = signal.Signals(signum).name
         _received.append(name)
-        if flag.requested:
+        second = flag.requested
+        for sweep in _sweeps:  # the request outlives the run it arrived in
+            if not sweep.requested:
+                sweep.signal_name = name
+        if second:
             if signum == signal.SIGINT:
                 raise KeyboardInterrupt
             signal.signal(signum, signal.SIG_DFL)
@@ -114,7 +126,7 @@ def stop_at_next_step(on_request: Callable[[str], None] | None = None, quiet: bo
     :param quiet: print nothing when a signal arrives (by default one line on stderr says what happens).
     :return: the flag (a context manager yielding it).
     """
-    flag = StopFlag(signal_name=stop_received() if _worker else None)
+    flag = StopFlag(signal_name=stop_received() if _worker else _sweep_request())
     if threading.current_thread() is not threading.main_thread():
         yield flag
         return
@@ -133,6 +145,33 @@ def stop_at_next_step(on_request: Callable[[str], None] | None = None, quiet: bo
     finally:
         for signum, old in previous.items():
             signal.signal(signum, old)
+
+
+def _sweep_request() -> str | None:
+    """The signal that stopped an open sweep of this process (None: none did, or no sweep is open)."""
+    return next((sweep.signal_name for sweep in _sweeps if sweep.requested), None)
+
+
+@contextlib.contextmanager
+def sweep_stop(on_request: Callable[[str], None] | None = None) -> Iterator[StopFlag]:
+    """A sweep of runs: a stop signal received anywhere within the block sets the yielded flag, for the whole block.
+
+    Inside a run's :func:`stop_at_next_step` block the run's handler takes the signal and sets this flag too;
+    between runs (and in a run's final evaluation, outside ``learn``) this block's own handler takes it instead of
+    ending the process. Either way the sweep starts no further run once the flag is set, and a run started after it
+    starts with its own flag set (a second signal then stops at once). Blocks nest; the handlers in place before the
+    block are put back at its end.
+
+    :param on_request: called once, from the handler, with the signal's name when the first signal arrives
+        between runs (e.g. to pass it on to worker processes).
+    :return: the flag (a context manager yielding it).
+    """
+    with stop_at_next_step(on_request=on_request, quiet=True) as flag:
+        _sweeps.append(flag)
+        try:
+            yield flag
+        finally:
+            _sweeps.remove(flag)
 
 
 def raise_if_stopped(flag: StopFlag, done: int, total: int, what: str, where: object) -> None:

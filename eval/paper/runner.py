@@ -48,6 +48,7 @@ from eval.provenance import (
     read_provenance,
     write_provenance,
 )
+from eval.stop import sweep_stop
 
 Log = Callable[[str], None]
 
@@ -158,14 +159,15 @@ def run_parts(
         # Recorded before the run, so that a run finished by an invocation that is later killed still names the
         # command that produced it; rewritten with the run's status below.
         write_provenance(job.run_dir, command, parts=part_of.get(job.run_dir, []), scale=parts[0].scale, status="started")
-    summary.ran = executor.map(to_run, progress=progress) if to_run else []
+    with sweep_stop() as stop:  # a stop request during the runs also keeps the figures from starting
+        summary.ran = executor.map(to_run, progress=progress) if to_run else []
     for result in summary.ran:
         write_provenance(
             result.run_dir, command, parts=part_of.get(result.run_dir, []), scale=parts[0].scale, status=result.status
         )
         if not result.ok:
             log(f"{result.status} {result.run_dir}: {(result.error or '').strip().splitlines()[-1:]}")
-    if any(result.status == "stopped" for result in summary.ran):  # SIGTERM or Ctrl-C (eval.stop)
+    if stop.requested or any(result.status == "stopped" for result in summary.ran):  # SIGTERM or Ctrl-C (eval.stop)
         log("ebm-eval: stopped by a signal, the figures of this command not started: run it again to resume")
     elif any(part.figure is not None for part in parts):
         # Figures train their agents in this process: with the local executor, at its threads per run (--threads),

@@ -16,7 +16,7 @@ import pytest
 
 from eval.executors import LocalExecutor
 from eval.jobs import Job, JobResult
-from eval.stop import StopFlag, stop_at_next_step
+from eval.stop import StopFlag, stop_at_next_step, sweep_stop
 
 pytest.importorskip("envs.particle")
 
@@ -128,3 +128,64 @@ def test_a_sigterm_to_the_pool_reaches_the_running_workers_and_cancels_the_rest(
     assert [result.error for result in results[:2]] == ["SIGTERM", "SIGTERM"]  # forwarded to both workers
     assert all("not started" in result.error for result in results[2:])
     assert signal.getsignal(signal.SIGTERM) == before
+
+
+# ---- a stop outlives the run it arrived in ---------------------------------------------------------------------------
+
+
+def finishes_after_a_sigterm_in_its_evaluation(job: Job) -> JobResult:
+    """Seed 0 receives SIGTERM after ``learn`` (its final evaluation: outside any run block) and still finishes."""
+    if job.seed == 0:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.01)
+    return JobResult(job=job, status="ok")
+
+
+def finishes_after_a_sigterm_at_its_last_step(job: Job) -> JobResult:
+    """Seed 0 receives SIGTERM inside its ``learn`` block at the last step: nothing is left to stop, so it is ok."""
+    with stop_at_next_step(quiet=True) as flag:
+        if job.seed == 0:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.01)
+            assert flag.requested
+    return JobResult(job=job, status="ok")
+
+
+@pytest.mark.parametrize("runner", [finishes_after_a_sigterm_in_its_evaluation, finishes_after_a_sigterm_at_its_last_step])
+def test_in_process_a_stop_that_arrives_while_a_run_finishes_ends_the_sweep(tmp_path, runner):
+    before = signal.getsignal(signal.SIGTERM)
+    results = LocalExecutor(jobs=1, runner=runner).map(_jobs(3, tmp_path), progress=False)
+    assert [result.status for result in results] == ["ok", "stopped", "stopped"]  # the finished run is kept
+    assert all("not started" in (result.error or "") for result in results[1:])
+    assert signal.getsignal(signal.SIGTERM) == before
+
+
+def test_a_run_started_after_a_stop_in_the_sweep_starts_stopped():
+    with sweep_stop() as sweep:
+        with stop_at_next_step(quiet=True) as first:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(0.01)
+        assert first.requested and sweep.signal_name == "SIGTERM"
+        with stop_at_next_step(quiet=True) as second:
+            assert second.signal_name == "SIGTERM"  # a later signal is the second: it stops at once
+    with stop_at_next_step(quiet=True) as after:
+        assert not after.requested  # the sweep's request ends with the sweep
+
+
+def test_a_second_sigterm_in_the_next_run_of_a_sweep_ends_the_process():
+    code = (
+        "import os, signal, time\n"
+        "from eval.stop import stop_at_next_step, sweep_stop\n"
+        "with sweep_stop():\n"
+        "    with stop_at_next_step(quiet=True):\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        time.sleep(0.05)\n"
+        "    print('first run finished', flush=True)\n"
+        "    with stop_at_next_step(quiet=True):\n"
+        "        os.kill(os.getpid(), signal.SIGTERM)\n"
+        "        time.sleep(5)\n"
+        "print('survived', flush=True)\n"
+    )
+    completed = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert completed.returncode == -signal.SIGTERM, completed.stderr[-2000:]
+    assert completed.stdout == "first run finished\n"
