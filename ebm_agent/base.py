@@ -324,6 +324,17 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         raise NotImplementedError
 
     # ---------------------------------------------------------------- acting
+    @property
+    def deterministic_episodes_repeat(self) -> bool:
+        """Whether ``predict(deterministic=True)`` depends on nothing but the episode's observations.
+
+        The planner's noise is re-seeded at each deterministic call, so it does, unless a subgoal provider is set:
+        the graph's stall bookkeeping and edge penalties carry over from one episode to the next. An evaluation of
+        such an agent on an env that draws no random number runs one episode for all of them
+        (``eval.evaluation.repeats_exactly``).
+        """
+        return self.subgoals is None
+
     def _actions(self, states: np.ndarray, plans: np.ndarray, planned_actions: np.ndarray, steps: np.ndarray) -> np.ndarray:
         """Actions for step ``steps`` of each env's plan: planned ones, or inverse dynamics toward the next state.
 

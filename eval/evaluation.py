@@ -1,18 +1,27 @@
-"""Final evaluation of a trained model: per-episode scores, lengths and successes, and the SB3 ``evaluations.npz``."""
+"""Final evaluation of a trained model: per-episode scores, lengths and successes, and the SB3 ``evaluations.npz``.
+
+An evaluation asks for ``n`` deterministic episodes. Where they are bound to be one episode ``n`` times (an agent
+whose deterministic ``predict`` depends only on the episode's observations, on an env that draws no random number in
+``reset`` or ``step``, e.g. the maze from its fixed start), the episode is run once and stands for all ``n``: the
+scores, the mean, the std (0) and the recorded rows are the same numbers, for a tenth of the cost
+(:func:`repeats_exactly`; ``EpisodeScores.evaluated`` says how many ran).
+"""
 
 from __future__ import annotations
 
+import copy
 import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
+import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from stable_baselines3.common.evaluation import evaluate_policy
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 from eval import stats
 
@@ -24,11 +33,14 @@ class EpisodeScores:
     :param scores: undiscounted sum of per-step rewards of each episode (the paper's score).
     :param lengths: number of steps of each episode.
     :param successes: ``info["is_success"]`` at the end of each episode; empty when the env does not report it.
+    :param evaluated: the episodes that were really run, when fewer than listed: 1 where the episodes repeat
+        exactly (:func:`repeats_exactly`) and one stands for them all; None when every listed episode ran.
     """
 
     scores: list[float]
     lengths: list[int]
     successes: list[bool] = field(default_factory=list)
+    evaluated: int | None = None
 
     @property
     def score_mean(self) -> float:
@@ -46,14 +58,93 @@ class EpisodeScores:
         return float(np.mean(self.successes)) if self.successes else None
 
 
+PROBE_STEPS = 20
+"""Steps of random actions with which :func:`draws_no_randomness` checks that an env's ``step`` draws nothing."""
+
+
+def _same_observation(first: Any, second: Any) -> bool:
+    if isinstance(first, dict):
+        return (
+            isinstance(second, dict)
+            and first.keys() == second.keys()
+            and all(np.array_equal(first[k], second[k]) for k in first)
+        )
+    return bool(np.array_equal(first, second))
+
+
+def draws_no_randomness(env: gym.Env) -> bool:
+    """Whether a fresh copy of ``env`` (same spec, same kwargs) starts every episode alike and draws no random number.
+
+    The copy is reset with a seed, then without one: the observation must be bit-identical and ``np_random`` (every
+    gymnasium env's source of randomness) untouched by the second reset; then ``PROBE_STEPS`` random actions must
+    leave ``np_random`` untouched. An env that draws from another generator escapes the check: such an env is
+    outside gymnasium's seeding contract.
+
+    :param env: the env (its ``spec`` is what is copied; ``env`` itself is not touched).
+    :return: False as well when it cannot be told (no spec, an action space other than a ``Box``).
+    """
+    spec = env.unwrapped.spec  # as registered and made, without the wrappers added after (Monitor)
+    if spec is None or not isinstance(env.action_space, gym.spaces.Box):
+        return False
+    try:
+        probe = gym.make(spec)
+    except Exception:  # a spec gymnasium cannot make again: it cannot be told
+        return False
+    try:
+        first, _ = probe.reset(seed=0)
+        generator = probe.unwrapped.np_random
+        state = copy.deepcopy(generator.bit_generator.state)
+        second, _ = probe.reset()
+        if generator.bit_generator.state != state or not _same_observation(first, second):
+            return False
+        space = probe.action_space
+        assert isinstance(space, gym.spaces.Box)
+        low, high = np.clip(space.low, -1.0, 1.0), np.clip(space.high, -1.0, 1.0)
+        actions = np.random.default_rng(0)
+        for _ in range(PROBE_STEPS):
+            _, _, terminated, truncated, _ = probe.step(actions.uniform(low, high).astype(space.dtype))
+            if generator.bit_generator.state != state:
+                return False
+            if terminated or truncated:
+                break
+        return True
+    finally:
+        probe.close()
+
+
+def repeats_exactly(model: Any, eval_env: VecEnv) -> bool:
+    """Whether every deterministic evaluation episode of ``model`` on ``eval_env`` is bound to be the same episode.
+
+    True when the model declares that its deterministic ``predict`` depends on nothing but the episode's observations
+    (``deterministic_episodes_repeat``: the planning agents without a subgoal graph, whose stall bookkeeping carries
+    over from one episode to the next) and the evaluation env is one plain env that draws no random number
+    (:func:`draws_no_randomness`).
+
+    :param model: the model evaluated.
+    :param eval_env: its evaluation ``VecEnv``.
+    :return: whether one episode can stand for all of them.
+    """
+    if not getattr(model, "deterministic_episodes_repeat", False):
+        return False
+    if not isinstance(eval_env, DummyVecEnv) or eval_env.num_envs != 1:
+        return False
+    return draws_no_randomness(eval_env.envs[0])
+
+
 def evaluate_episodes(model: BaseAlgorithm, eval_env: VecEnv, n_eval_episodes: int) -> EpisodeScores:
     """Run ``n_eval_episodes`` deterministic episodes with SB3's ``evaluate_policy`` and keep every number.
+
+    Where the episodes repeat exactly (:func:`repeats_exactly`) one is run and listed ``n_eval_episodes`` times
+    (``evaluated=1``): the same numbers as running them all.
 
     :param model: the trained model.
     :param eval_env: a Monitor-wrapped evaluation ``VecEnv`` (never the training env).
     :param n_eval_episodes: number of episodes.
     :return: per-episode scores, lengths and successes.
     """
+    if n_eval_episodes > 1 and repeats_exactly(model, eval_env):
+        one = evaluate_episodes(model, eval_env, 1)
+        return _listed(one, n_eval_episodes)
     successes: list[bool] = []
 
     def track_success(locals_: dict[str, Any], _globals: dict[str, Any]) -> None:
@@ -76,6 +167,56 @@ def evaluate_episodes(model: BaseAlgorithm, eval_env: VecEnv, n_eval_episodes: i
     return EpisodeScores([float(s) for s in scores], [int(n) for n in lengths], successes)
 
 
+def _listed(one: EpisodeScores, n: int) -> EpisodeScores:
+    """The evaluation of one episode that stands for ``n`` identical ones."""
+    return EpisodeScores(one.scores * n, one.lengths * n, one.successes * n, evaluated=len(one.scores))
+
+
+class RepeatAwareEvalCallback(EvalCallback):
+    """SB3's ``EvalCallback`` that runs one episode where the episodes repeat exactly (:func:`repeats_exactly`).
+
+    That episode is listed ``n_eval_episodes`` times in the learning curve (``evaluations.npz``) and in what the
+    callbacks after it read: the same numbers as running them all. Whether they repeat is checked once, at the
+    first evaluation (it depends on the model's settings and the env, neither of which ``learn`` changes).
+    """
+
+    repeats: bool | None = None
+    """Whether the episodes repeat exactly (None until the first evaluation)."""
+
+    def _on_step(self) -> bool:
+        if not (self.eval_freq > 0 and self.n_calls % self.eval_freq == 0) or self.n_eval_episodes <= 1:
+            return super()._on_step()
+        if self.repeats is None:
+            self.repeats = repeats_exactly(self.model, self.eval_env)
+        if not self.repeats:
+            return super()._on_step()
+        n = self.n_eval_episodes
+        self.n_eval_episodes = 1
+        # The callbacks after an evaluation must read all n episodes: list them before those callbacks run.
+        inner, self.callback = self.callback, None
+        try:
+            continue_training = super()._on_step()
+        finally:
+            self.n_eval_episodes, self.callback = n, inner
+        if self.log_path is not None and self.evaluations_results:
+            self.evaluations_results[-1] = list(self.evaluations_results[-1]) * n
+            self.evaluations_length[-1] = list(self.evaluations_length[-1]) * n
+            extra: dict[str, Any] = {}
+            if len(self.evaluations_successes) == len(self.evaluations_results):
+                self.evaluations_successes[-1] = list(self.evaluations_successes[-1]) * n
+                extra["successes"] = self.evaluations_successes
+            np.savez(
+                self.log_path,
+                timesteps=self.evaluations_timesteps,
+                results=self.evaluations_results,
+                ep_lengths=self.evaluations_length,
+                **extra,
+            )
+        if inner is not None:
+            continue_training = continue_training and self._on_event()
+        return continue_training
+
+
 def last_evaluation(callback: EvalCallback, timesteps: int, n_eval_episodes: int) -> EpisodeScores | None:
     """The episodes of ``EvalCallback``'s last evaluation, if it ran at ``timesteps`` with ``n_eval_episodes``.
 
@@ -92,7 +233,8 @@ def last_evaluation(callback: EvalCallback, timesteps: int, n_eval_episodes: int
     successes: list[bool] = []
     if len(callback.evaluations_successes) == len(callback.evaluations_results):
         successes = [bool(flag) for flag in callback.evaluations_successes[-1]]
-    return EpisodeScores([float(s) for s in scores], [int(n) for n in lengths], successes)
+    evaluated = 1 if getattr(callback, "repeats", False) and n_eval_episodes > 1 else None
+    return EpisodeScores([float(s) for s in scores], [int(n) for n in lengths], successes, evaluated)
 
 
 class EvaluationLine(BaseCallback):
@@ -133,9 +275,10 @@ class EvaluationLine(BaseCallback):
         elapsed = time.perf_counter() - self._start
         done = max(self.num_timesteps - self._start_steps, 1)  # transitions this process has consumed
         left = elapsed / done * max(self.budget - self.num_timesteps, 0)
+        once = " (1 episode run: the deterministic episodes repeat exactly)" if getattr(parent, "repeats", False) else ""
         line = (
             f"{self.label}: {self.num_timesteps}/{self.budget} transitions, evaluation {scores.mean():.2f} "
-            f"± {scores.std():.2f}{success}; {elapsed / 60:.1f} min so far, about {left / 60:.0f} min left"
+            f"± {scores.std():.2f}{success}{once}; {elapsed / 60:.1f} min so far, about {left / 60:.0f} min left"
         )
         self.lines.append(line)
         print(line, file=self.stream or sys.stderr, flush=True)
@@ -183,4 +326,13 @@ def append_evaluation(path: Path, timesteps: int, episodes: EpisodeScores) -> No
     np.savez(path, **arrays)
 
 
-__all__ = ["EpisodeScores", "append_evaluation", "evaluate_episodes", "last_evaluation"]
+__all__ = [
+    "PROBE_STEPS",
+    "EpisodeScores",
+    "RepeatAwareEvalCallback",
+    "append_evaluation",
+    "draws_no_randomness",
+    "evaluate_episodes",
+    "last_evaluation",
+    "repeats_exactly",
+]

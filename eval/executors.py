@@ -20,6 +20,7 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 from tqdm.auto import tqdm
 
+from eval.code_version import code_version, pin_code_version
 from eval.jobs import Job, JobResult, Runner
 from eval.run import run_job
 from eval.stop import install_worker_handlers, stop_received, sweep_stop
@@ -45,11 +46,14 @@ def _limit_threads(threads: int) -> None:
     torch.set_num_threads(threads)
 
 
-def _start_worker(threads: int) -> None:
-    """Pool initializer: limit torch's threads, and remember stop signals rather than die of them (``eval.stop``)."""
+def _start_worker(threads: int, version: dict[str, Any]) -> None:
+    """Pool initializer: limit torch's threads, remember stop signals rather than die of them (``eval.stop``), and take
+    the sweep's code version, so that a worker spawned after a library change refuses its runs
+    (``eval.code_version``)."""
 
     _limit_threads(threads)
     install_worker_handlers()
+    pin_code_version(version)
 
 
 def _pool_job(runner: Runner, job: Job) -> JobResult:
@@ -102,6 +106,7 @@ class LocalExecutor:
         jobs = list(jobs)
         if not jobs:
             return []
+        code_version()  # the version this sweep runs, read at its start (eval.code_version)
         with tqdm(total=len(jobs), desc="ebm-eval jobs", unit="job", disable=not progress) as bar:
             if self.jobs == 1:
                 self.limit_this_process()
@@ -131,7 +136,10 @@ class LocalExecutor:
         results: list[JobResult | None] = [None] * len(jobs)
         workers = min(self.jobs, len(jobs))
         with ProcessPoolExecutor(
-            workers, mp_context=context, initializer=_start_worker, initargs=(self.threads_per_job or 1,)
+            workers,
+            mp_context=context,
+            initializer=_start_worker,
+            initargs=(self.threads_per_job or 1, code_version()),
         ) as pool:
             futures: dict[Future[JobResult], int] = {pool.submit(_pool_job, self.runner, job): i for i, job in enumerate(jobs)}
 

@@ -31,13 +31,11 @@ and stops it (``eval.stop``), so that nothing collected is lost.
 
 from __future__ import annotations
 
-import contextlib
 import functools
 import hashlib
 import json
 import shutil
 import time
-from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -51,6 +49,7 @@ from ebm_agent import EBMPlannerAgent
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from eval.jobs import Job, to_plain
+from eval.locks import file_lock
 from eval.resume import ResumeCheckpoint, read_checkpoint_files, write_checkpoint_files
 from eval.stop import raise_if_stopped, stop_at_next_step
 
@@ -204,7 +203,7 @@ def _load_or_build(job: Job) -> tuple[TransitionDataset, Path, float]:
         (0 when the dataset came from the cache or was collected in one go).
     """
     path = dataset_path(job)
-    with _file_lock(path.with_suffix(".lock")):
+    with file_lock(path.with_suffix(".lock")):
         if path.exists():
             return TransitionDataset.load(path), path, 0.0
         if job.dataset == "random":
@@ -384,23 +383,6 @@ def repeat_transitions(dataset: TransitionDataset, repeat: int) -> TransitionDat
 def _state_of(observation: Any) -> np.ndarray:
     state = observation["observation"] if isinstance(observation, dict) else observation
     return np.asarray(state, dtype=np.float32).reshape(-1).copy()
-
-
-@contextlib.contextmanager
-def _file_lock(path: Path) -> Iterator[None]:
-    """An exclusive lock on ``path`` across processes of this machine (none where ``fcntl`` is missing)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "a") as handle:
-        try:
-            import fcntl
-        except ImportError:  # not POSIX: parallel jobs may collect a dataset twice, the atomic save keeps it whole
-            yield
-            return
-        fcntl.flock(handle, fcntl.LOCK_EX)
-        try:
-            yield
-        finally:
-            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 __all__ = [

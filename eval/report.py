@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ebm_agent.checkpoint_files import atomic_path
 from eval import stats
 from eval.anchors import EnvAnchors
 from eval.jobs import JobResult
@@ -275,7 +276,8 @@ def write_markdown(
     :return: the markdown text (to print).
     """
     text = render_markdown(results, anchors, command)
-    path.write_text(text)
+    with atomic_path(path) as temporary:  # a reader never sees half a table
+        temporary.write_text(text)
     return text
 
 

@@ -7,6 +7,7 @@ at a time (``RUN_LOCK``).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import os
@@ -20,7 +21,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import yaml
-from stable_baselines3.common.callbacks import BaseCallback, CallbackList, EvalCallback
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import TensorBoardOutputFormat, configure
 
@@ -28,7 +29,15 @@ import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) proce
 from ebm_agent.datasets import collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from ebm_agent.probe import model_quality
-from eval.evaluation import EpisodeScores, EvaluationLine, append_evaluation, evaluate_episodes, last_evaluation
+from eval.code_version import CodeChanged, check_code_unchanged, code_version
+from eval.evaluation import (
+    EpisodeScores,
+    EvaluationLine,
+    RepeatAwareEvalCallback,
+    append_evaluation,
+    evaluate_episodes,
+    last_evaluation,
+)
 from eval.jobs import (
     EVAL_SEED_OFFSET,
     GRAPH_TRANSITIONS,
@@ -66,13 +75,23 @@ def run_job(job: Job) -> JobResult:
     except Exception:  # another live process owns the folder: leave its files alone
         return JobResult(job=job, status="failed", wall_time_s=0.0, error=traceback.format_exc())
     try:
+        check_code_unchanged(f"run {run_dir} not started")
         for name in RUN_OUTPUTS:
             (run_dir / name).unlink(missing_ok=True)
-        config = {**to_plain(asdict(job)), "fingerprint": job_fingerprint(job), "versions": library_versions()}
+        config = {
+            **to_plain(asdict(job)),
+            "fingerprint": job_fingerprint(job),
+            "versions": library_versions(),
+            "code": code_version(),
+        }
         (run_dir / "config.yaml").write_text(yaml.safe_dump(config, sort_keys=False))
         return _train_and_evaluate(job, start)
     except RunStopped as stop:  # SIGTERM or Ctrl-C: its checkpoint is written, the next call resumes it
         return JobResult(job=job, status="stopped", wall_time_s=time.perf_counter() - start, error=str(stop))
+    except CodeChanged as changed:  # a sweep runs one version of the code (eval.code_version)
+        with contextlib.suppress(OSError):
+            (run_dir / "error.txt").write_text(f"{changed}\n")
+        return JobResult(job=job, status="failed", wall_time_s=time.perf_counter() - start, error=str(changed))
     except Exception:  # a failed run must not end the sweep
         error = traceback.format_exc()
         try:
@@ -230,6 +249,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "episode_lengths": episodes.lengths,
             "success_rate": episodes.success_rate,
             "episode_successes": episodes.successes,
+            "evaluated_episodes": episodes.evaluated or len(episodes.scores),
             "final_evaluation": "EvalCallback at the final step" if reused else "evaluate_policy after learning",
             "eval_env_kwargs": to_plain(eval_kwargs),
             "extra_evaluations": extra,
@@ -244,7 +264,10 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
             "fingerprint": job_fingerprint(job),
             "defaults_digest": defaults_digest(job),
             "versions": library_versions(),
+            "code": code_version(),
         }
+        # Modules imported while it ran (an env's at gym.make, a worker's) must have been the sweep's version.
+        check_code_unchanged(f"run {run_dir} not recorded (its checkpoint is kept)")
         (run_dir / "metrics.json").write_text(json.dumps(to_plain(metrics), indent=2))
         discard_run_state(job)  # finished: the checkpoint is no longer needed
         return JobResult(
@@ -343,7 +366,7 @@ def _learn_online(
     if not job.progress_bar:  # one line per evaluation says that a long run is alive and how far it is
         after_eval.append(EvaluationLine(str(job.run_dir), job.timesteps))
     # EvalCallback counts callback calls, i.e. vectorised steps: n_envs transitions each.
-    eval_callback = EvalCallback(
+    eval_callback = RepeatAwareEvalCallback(
         eval_env,
         n_eval_episodes=job.eval_episodes,
         eval_freq=max(job.eval_freq // model.n_envs, 1),

@@ -17,6 +17,7 @@ the reason we know (``eval.paper.differences``). Figures are copied to ``<docs>/
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import shlex
 import shutil
@@ -29,9 +30,11 @@ from typing import Any
 
 import numpy as np
 
+from ebm_agent.checkpoint_files import atomic_path
 from eval import stats
 from eval.anchors import EnvAnchors, compute_anchors
 from eval.jobs import Job, to_plain
+from eval.locks import file_lock
 from eval.paper.claims import evaluate_claims, render_claims
 from eval.paper.differences import find_differences, render_differences
 from eval.paper.estimates import format_duration
@@ -304,8 +307,8 @@ def anchors_rows(results: Sequence[CellResult], out_dir: Path) -> list[tuple[str
         shown = {k: v for k, v in kwargs.items() if k != "max_episode_steps"}
         label = result.cell.env + (f" ({', '.join(f'{k}={v}' for k, v in shown.items())})" if shown else "")
         rows.append((label, None if cache[key] is None else EnvAnchors(**cache[key])))
-    cache_path.parent.mkdir(parents=True, exist_ok=True)
-    cache_path.write_text(json.dumps(cache, indent=2))
+    with atomic_path(cache_path) as temporary:
+        temporary.write_text(json.dumps(cache, indent=2))
     return rows
 
 
@@ -531,8 +534,22 @@ def write_results(
     docs_path = Path(docs_path)
     docs_path.parent.mkdir(parents=True, exist_ok=True)
     text = render_results(Path(out_dir), docs_path, scale, seeds, records)
-    docs_path.write_text(text)
+    with atomic_path(docs_path) as temporary:  # a reader never sees half a document
+        temporary.write_text(text)
     return docs_path
+
+
+def report_lock(docs_path: Path) -> contextlib.AbstractContextManager[None]:
+    """The lock that the processes writing one results document take in turn (``.<name>.lock`` beside it).
+
+    Held while a writer gathers every finished run (its own and those that other processes recorded) and writes the
+    document, so that two ``ebm-eval`` processes ending at once write, one after the other, a complete document.
+
+    :param docs_path: the document.
+    :return: a context manager holding the lock.
+    """
+    docs_path = Path(docs_path)
+    return file_lock(docs_path.with_name(f".{docs_path.name}.lock"))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -559,9 +576,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     docs = default_docs(args.docs, args.scale, args.out)
     records = default_records(args.records, docs, args.out)
-    if records:
-        print(restore_records(Path(records), Path(args.out)).describe("restored", Path(records), Path(args.out)))
-    path = write_results(Path(args.out), Path(docs), args.scale, args.seeds, records)
+    with report_lock(Path(docs)):
+        if records:
+            print(restore_records(Path(records), Path(args.out)).describe("restored", Path(records), Path(args.out)))
+        path = write_results(Path(args.out), Path(docs), args.scale, args.seeds, records)
     print(f"Results document: {path}")
     return 0
 
@@ -577,6 +595,7 @@ __all__ = [
     "part_status",
     "parts_table",
     "render_results",
+    "report_lock",
     "score_of",
     "write_results",
 ]

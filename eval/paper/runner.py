@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from ebm_agent.checkpoint_files import atomic_path
+from eval.code_version import code_version
 from eval.executors import Executor
 from eval.jobs import Job, JobResult
 from eval.paper import figures
@@ -35,7 +36,7 @@ from eval.paper.experiments import build_parts, describe_experiments, make_conte
 from eval.paper.figures.common import _current_seed_files, figure_digest, figure_state, recorded_figure_digests
 from eval.paper.parts import Part
 from eval.paper.records import FIGURE_STARTED, restore_records, save_records
-from eval.paper.results_doc import write_results
+from eval.paper.results_doc import report_lock, write_results
 from eval.provenance import (
     append_session,
     completed_result,
@@ -186,6 +187,7 @@ def run_parts(
             "finished": now(),
             "wall_time_s": time.perf_counter() - start,
             "machine": machine_info(),
+            "code": code_version(),
             "parts": [part.name for part in parts],
             "ran": [str(r.run_dir) for r in summary.ran if r.ok] + summary.figures_ran,
             "skipped": [str(r.run_dir) for r in summary.skipped] + summary.figures_skipped,
@@ -381,9 +383,15 @@ def run_experiments(
     # The published document (the one kept with records) reports the protocol's seeds: ``--seeds`` on a run only
     # splits the work, and must not turn the figures of other seed sets into "not run yet".
     seeds = None if (records and not settings["report_only"]) else settings["seeds"]
-    path = write_results(out, Path(settings["docs"]), settings["scale"], seeds, records=records)
-    if records:  # after the document, so that the anchors it computed are kept too
-        _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
+    # One writer at a time: each records its own runs, takes every run the others recorded, then writes the whole
+    # document atomically, so that processes ending at once leave a complete one, whichever writes last.
+    with report_lock(Path(settings["docs"])):
+        if records:
+            save_records(out, Path(records))
+            restore_records(Path(records), out)
+        path = write_results(out, Path(settings["docs"]), settings["scale"], seeds, records=records)
+        if records:  # after the document, so that the anchors it computed are kept too
+            _stderr(save_records(out, Path(records)).describe("recorded", out, Path(records)))
     print(f"Results document: {path} (from {settings['out']}/)")
     return 0 if summary.ok else 1
 
