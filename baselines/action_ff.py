@@ -205,6 +205,8 @@ class ActionFFAgent(PlannerAgentBase):
     :param subgoal_graph: graph subgoals (:class:`~ebm_agent.base.PlannerAgentBase`); Action FF has no energy, so
         its graph's edges must be the moves it made (``{"edges": "real"}``). None (the default): plans aim at the goal.
     :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`); None: none.
+    :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
+        inferred from a reset observation and printed with ``verbose >= 1``; ``goal_spec.goal_indices`` holds them).
     :param stats_window_size: episodes averaged for ``rollout/*``.
     :param tensorboard_log: TensorBoard folder.
     :param verbose: verbosity.
@@ -225,10 +227,11 @@ class ActionFFAgent(PlannerAgentBase):
         residual: bool = True,
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
-        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        inverse_dynamics: str | InverseDynamics | None = None,
         standardize_outputs: bool | None = True,
         subgoal_graph: dict[str, Any] | None = None,
         explore: dict[str, Any] | None = None,
+        goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -253,6 +256,7 @@ class ActionFFAgent(PlannerAgentBase):
             inverse_dynamics=inverse_dynamics,
             subgoal_graph=subgoal_graph,
             explore=explore,
+            goal_indices=goal_indices,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,

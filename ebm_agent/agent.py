@@ -124,13 +124,16 @@ class EBMPlannerAgent(PlannerAgentBase):
     :param perturb_scales: the noise scales c of ``perturbed_negatives``, in units of the real moves' per-dim std.
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
-    :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"`` or an instance.
+    :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"``, an instance, or None (the default): the
+        env's own where it has them, else the learned default (:class:`~ebm_agent.base.PlannerAgentBase`).
     :param subgoal_graph: the graph subgoals of :class:`~ebm_agent.base.PlannerAgentBase` (issue #36); its edges
         may come from this agent's energy (the default). None (the default, the paper's): plans aim at the goal.
     :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`). None (the
         default, the paper's): none.
     :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
         states only); 0 disables them.
+    :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
+        inferred from a reset observation and printed with ``verbose >= 1``; ``goal_spec.goal_indices`` holds them).
     :param stats_window_size: episodes averaged for ``rollout/*``.
     :param tensorboard_log: TensorBoard folder.
     :param verbose: verbosity.
@@ -158,10 +161,11 @@ class EBMPlannerAgent(PlannerAgentBase):
         perturb_scales: Sequence[float] = (0.25, 0.5, 1.0, 2.0),
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
-        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        inverse_dynamics: str | InverseDynamics | None = None,
         image_log_interval: int = 1000,
         subgoal_graph: dict[str, Any] | None = None,
         explore: dict[str, Any] | None = None,
+        goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -215,6 +219,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             inverse_dynamics=inverse_dynamics,
             subgoal_graph=subgoal_graph,
             explore=explore,
+            goal_indices=goal_indices,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
             verbose=verbose,

@@ -9,6 +9,8 @@ with the plan carried in ``state``, lives here so the EBM agent and the Action F
 from __future__ import annotations
 
 import time
+import warnings
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
@@ -118,6 +120,25 @@ class OnlineLoopState:
         )
 
 
+LEARNED_INVERSE_DYNAMICS = "rls"
+"""The inverse model an agent with ``inverse_dynamics=None`` learns on an env without its own (issue 46's measure:
+FetchReach-v4, success 0.10 with RLS and 0.00 with the MLP after 10,000 transitions, fast preset)."""
+
+
+def _env_name(env: Any) -> str:
+    """The env's registered id (or its class) for messages."""
+    try:
+        spec = env.get_attr("spec", indices=[0])[0]
+    except (AttributeError, IndexError):
+        spec = None
+    if spec is not None and getattr(spec, "id", None):
+        return f"the env {spec.id!r}"
+    try:
+        return f"the env {type(env.get_attr('unwrapped', indices=[0])[0]).__name__}"
+    except (AttributeError, IndexError):
+        return "the env"
+
+
 class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     """Base class of agents that plan a state trajectory, act along it and learn their model online.
 
@@ -127,8 +148,10 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     :param learning_rate: learning rate of the model's optimiser.
     :param horizon: T, number of planned transitions: the planner's, which the subclass reads from it.
     :param online: :class:`OnlineConfig` (or a dict of its fields).
-    :param inverse_dynamics: ``"ground_truth"`` (the env's ``inverse_dynamics``), ``"mlp"`` (learned), ``"rls"``
-        (recursive least squares) or an :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance.
+    :param inverse_dynamics: ``"ground_truth"`` (the env's ``inverse_dynamics``; an env without it is refused at
+        construction), ``"mlp"`` (learned), ``"rls"`` (recursive least squares), an
+        :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance, or None (the default): the env's where it
+        has them, else ``LEARNED_INVERSE_DYNAMICS``, with a warning that says so.
     :param subgoal_graph: long-horizon goal reaching (issue #36): keyword arguments of
         :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}`` for its defaults), with which the agent
         builds a graph over the real transitions it learned from at the end of ``learn_offline`` (the dataset's) and
@@ -142,6 +165,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
         ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
         graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
+    :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
+        inferred from a reset observation and printed with ``verbose >= 1``; ``goal_spec.goal_indices`` holds them).
     :param stats_window_size: episodes averaged for ``rollout/*`` logs.
     :param tensorboard_log: folder of TensorBoard runs (None: no TensorBoard).
     :param verbose: 0 silent, 1 info, 2 debug.
@@ -161,9 +186,10 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         learning_rate: float = 1e-3,
         horizon: int = 10,
         online: OnlineConfig | dict[str, Any] | None = None,
-        inverse_dynamics: str | InverseDynamics = "ground_truth",
+        inverse_dynamics: str | InverseDynamics | None = None,
         subgoal_graph: dict[str, Any] | None = None,
         explore: dict[str, Any] | None = None,
+        goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
         verbose: int = 0,
@@ -172,6 +198,16 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         _init_setup_model: bool = True,
     ) -> None:
         check_long_horizon(subgoal_graph, explore, self)
+        if isinstance(policy, str) and policy not in self.policy_aliases:
+            raise ValueError(
+                f"{type(self).__name__} takes policy 'MultiInputPolicy' (its networks plan over the Dict observation "
+                f"of a goal-conditioned env), got {policy!r}. Pass 'MultiInputPolicy'."
+            )
+        if str(device).startswith("cuda") and not torch.cuda.is_available():
+            warnings.warn(
+                f"{type(self).__name__}: device={device!r} but CUDA is not available here; the agent runs on the CPU.",
+                stacklevel=2,
+            )
         if env is not None and not isinstance(env, str):
             check_spaces(env.observation_space, env.action_space, owner=type(self).__name__)
         super().__init__(
@@ -200,6 +236,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
         self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
         self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
+        self.goal_indices = None if goal_indices is None else [int(index) for index in goal_indices]
         if _init_setup_model:
             self._setup_model()
 
@@ -211,7 +248,12 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if self.goal_spec is None:
             if self.env is None:
                 raise ValueError(f"{type(self).__name__} needs an env to read the state/goal layout from.")
-            self.goal_spec = read_goal_spec(self.env)
+            self.goal_spec = read_goal_spec(self.env, getattr(self, "goal_indices", None))
+            if self.goal_spec.goal_indices_inferred and self.verbose >= 1:
+                print(
+                    f"{type(self).__name__}: goal dims inferred from a reset observation: observation"
+                    f"{self.goal_spec.goal_indices.tolist()} == achieved_goal (pass goal_indices=[...] to override)"
+                )
         spec = self.goal_spec
         self._generator = torch.Generator(device=self.device)
         self._generator.manual_seed(self._base_seed())
@@ -231,12 +273,12 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     def _build_inverse_dynamics(self) -> None:
         spec = self.goal_spec
         assert spec is not None
-        kind = self.inverse_dynamics_kind
-        if not isinstance(kind, str):
+        kind = self._inverse_dynamics_choice()
+        if kind is not None and not isinstance(kind, str):
             self.inverse_model: InverseDynamics | None = kind
             return
         fn = env_inverse_dynamics(self.env) if (kind == "ground_truth" and self.env is not None) else None
-        if kind == "ground_truth" and fn is None:
+        if kind is None or (kind == "ground_truth" and fn is None):
             # No env (a model loaded for prediction only) or an env without ground truth: resolved at first use.
             self.inverse_model = None
             return
@@ -258,6 +300,33 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             **options,
         )
 
+    def _inverse_dynamics_choice(self) -> str | InverseDynamics | None:
+        """What ``inverse_dynamics`` stands for on the current env (None: no env yet, resolved once one is set).
+
+        :raises ValueError: for ``"ground_truth"`` on an env that has no ``inverse_dynamics``, naming the env and
+            the options.
+        """
+        kind = self.inverse_dynamics_kind
+        if self.env is None or not (kind is None or kind == "ground_truth"):
+            return kind
+        if env_inverse_dynamics(self.env) is not None:
+            return "ground_truth"
+        name = _env_name(self.env)
+        if kind == "ground_truth":
+            raise ValueError(
+                f"inverse_dynamics='ground_truth' takes the env's own inverse dynamics, but {name} has no "
+                "`inverse_dynamics(states, next_states)` method. Choose a learned model: inverse_dynamics='rls' "
+                "(recursive least squares) or 'mlp', or leave it out (None) to get the learned default "
+                f"({LEARNED_INVERSE_DYNAMICS!r})."
+            )
+        warnings.warn(
+            f"{type(self).__name__}: {name} has no `inverse_dynamics`, so planned states become actions through a "
+            f"learned inverse model: inverse_dynamics={LEARNED_INVERSE_DYNAMICS!r} (pass 'mlp' or an "
+            "InverseDynamics instance to choose another).",
+            stacklevel=3,
+        )
+        return LEARNED_INVERSE_DYNAMICS
+
     def _require_inverse_dynamics(self) -> InverseDynamics:
         if self.inverse_model is None:
             raise RuntimeError(
@@ -277,7 +346,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         super().set_env(env, force_reset=force_reset)
         if force_reset:
             self._online_loop = None  # the plans in flight belong to the states of the env before the reset
-        if self.inverse_dynamics_kind == "ground_truth":
+        if self.inverse_dynamics_kind is None or self.inverse_dynamics_kind == "ground_truth":
             self._build_inverse_dynamics()
 
     def _excluded_save_params(self) -> list[str]:
@@ -567,7 +636,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     ) -> SelfPlannerAgent:
         """Learn the model online (Algorithm 1): plan, act until the real states deviate, train, repeat.
 
-        Stops at exactly ``total_timesteps`` transitions (summed over envs; it must be a multiple of ``n_envs``).
+        Stops at exactly ``total_timesteps`` transitions (summed over envs); a budget that is not a multiple of
+        ``n_envs`` is rounded down to one, with a warning.
 
         :param total_timesteps: number of environment transitions to consume.
         :param callback: SB3 callback(s), called once per (vectorised) env step.
@@ -583,13 +653,24 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """
         if not isinstance(total_timesteps, (int, np.integer)) or total_timesteps < 0:
             raise ValueError(f"total_timesteps must be a non-negative int, got {total_timesteps!r}.")
-        if total_timesteps % self.n_envs != 0:
-            raise ValueError(
-                f"total_timesteps={total_timesteps} is not a multiple of n_envs={self.n_envs}: every env step consumes "
-                f"{self.n_envs} transitions, so the budget could not be met exactly. Use a multiple of {self.n_envs}."
-            )
         if self.env is None:
             raise ValueError("learn() needs an env: pass it to the constructor, to load(path, env=...), or set_env().")
+        if total_timesteps % self.n_envs != 0:
+            kept = int(total_timesteps) - int(total_timesteps) % self.n_envs
+            warnings.warn(
+                f"total_timesteps={total_timesteps} is not a multiple of n_envs={self.n_envs}: every env step consumes "
+                f"{self.n_envs} transitions, so learn consumes {kept}, the largest multiple not above the budget "
+                "(never more than it).",
+                stacklevel=2,
+            )
+            total_timesteps = kept
+        if self.num_timesteps > 0 and len(self.pos_buffer) == 0:
+            warnings.warn(
+                f"{type(self).__name__}.learn after load(): the agent has learned {self.num_timesteps} transitions but "
+                "its replay buffers start empty (a saved model keeps the networks, not the data). To go on exactly "
+                "where training stopped, save with save_checkpoint(path) and resume with load_checkpoint(path, env=...).",
+                stacklevel=2,
+            )
         if reset_num_timesteps or self._last_obs is None:
             self._online_loop = None  # SB3 resets the env: no plan in flight survives that
         if self.explore is not None:

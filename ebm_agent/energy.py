@@ -6,6 +6,7 @@ import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -16,7 +17,16 @@ from ebm_agent.config import check_field_types
 from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.networks import build_mlp, make_activation, normalise_dims
 
-__all__ = ["EnergyConfig", "EnergyModel", "FourierFeatures", "PeriodicFeatures", "TransitionEvaluator"]
+__all__ = [
+    "EVAL_CHUNK",
+    "EnergyConfig",
+    "EnergyModel",
+    "FourierFeatures",
+    "PeriodicFeatures",
+    "TransitionEvaluator",
+    "energy_function",
+    "transition_energies",
+]
 
 
 @dataclass
@@ -440,3 +450,44 @@ class TransitionEvaluator:
             return network().view(leading)  # [M, 1] -> [...]
 
         return energies
+
+
+EVAL_CHUNK = 65_536
+"""Transitions per energy call, to bound the activation memory."""
+
+
+def energy_function(agent: Any) -> Callable[[Tensor, Tensor], Tensor]:
+    """The energy of an agent (its ``energy_model``) or the energy itself."""
+    model = getattr(agent, "energy_model", agent)
+    if not callable(model):
+        raise TypeError(f"expected an agent with an energy_model or an energy callable, got {type(agent).__name__}.")
+    return model  # type: ignore[no-any-return]
+
+
+def transition_energies(agent: Any, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
+    """E(s, s') of [N, D] pairs as float64 [N], without gradients, in chunks and in eval mode (a spectral norm's power
+    iteration must not run); the model's mode is restored.
+
+    :param agent: an agent with ``energy_model``, or an energy callable.
+    :param states: [N, D].
+    :param next_states: [N, D].
+    :return: [N] energies.
+    """
+    model = energy_function(agent)
+    was_training = isinstance(model, nn.Module) and model.training
+    parameter = next(model.parameters(), None) if isinstance(model, nn.Module) else None
+    device = parameter.device if parameter is not None else torch.device("cpu")
+    if isinstance(model, nn.Module):
+        model.eval()
+    try:
+        chunks = []
+        with torch.no_grad():
+            for start in range(0, len(states), EVAL_CHUNK):
+                state_chunk = torch.as_tensor(np.ascontiguousarray(states[start : start + EVAL_CHUNK]), device=device)
+                next_chunk = torch.as_tensor(np.ascontiguousarray(next_states[start : start + EVAL_CHUNK]), device=device)
+                chunks.append(model(state_chunk.float(), next_chunk.float()).double().cpu().numpy())  # [chunk]
+    finally:
+        if was_training:
+            assert isinstance(model, nn.Module)
+            model.train()
+    return np.concatenate(chunks) if chunks else np.zeros(0)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -26,6 +27,8 @@ class GoalSpec:
     :param state_high: [D] upper bounds, or None.
     :param action_low: [A] action lower bounds.
     :param action_high: [A] action upper bounds.
+    :param goal_indices_inferred: whether ``goal_indices`` were inferred from a reset (the env declares none and
+        none were given).
     """
 
     state_dim: int
@@ -38,6 +41,7 @@ class GoalSpec:
     state_high: np.ndarray | None = None
     action_low: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
     action_high: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
+    goal_indices_inferred: bool = False
 
     @property
     def model_dims(self) -> np.ndarray:
@@ -99,14 +103,16 @@ def infer_goal_indices(observation: np.ndarray, achieved_goal: np.ndarray) -> np
     return np.asarray(indices, dtype=np.int64)
 
 
-def read_goal_spec(env: VecEnv) -> GoalSpec:
+def read_goal_spec(env: VecEnv, goal_indices: Sequence[int] | None = None) -> GoalSpec:
     """Read the planner-relevant facts from the first env of a VecEnv (the contract of ``envs``).
 
     Attributes missing on the env fall back to safe defaults: goal indices inferred from a reset observation,
     no target dims, no period, bounds from the observation space when finite.
 
     :param env: a VecEnv of goal-conditioned envs.
+    :param goal_indices: [G] observation dims the goal reads, overriding the env's (None: the env's, or inferred).
     :return: the spec.
+    :raises ValueError: for given ``goal_indices`` of the wrong length or outside the observation.
     """
     check_spaces(env.observation_space, env.action_space)
     obs_space = env.observation_space.spaces  # type: ignore[attr-defined]
@@ -121,10 +127,18 @@ def read_goal_spec(env: VecEnv) -> GoalSpec:
         except AttributeError:
             return default
 
-    goal_indices = attr("goal_indices", None)
-    if goal_indices is None:
+    declared: Any = goal_indices if goal_indices is not None else attr("goal_indices", None)
+    if goal_indices is not None:
+        given = np.asarray(goal_indices, dtype=np.int64)
+        if given.shape != (goal_dim,) or np.any(given < 0) or np.any(given >= state_dim):
+            raise ValueError(
+                f"goal_indices={list(goal_indices)} must name {goal_dim} observation dims (desired_goal has {goal_dim}) "
+                f"in [0, {state_dim})."
+            )
+    inferred = declared is None
+    if inferred:
         obs = env.reset()
-        goal_indices = infer_goal_indices(obs["observation"], obs["achieved_goal"])  # type: ignore[call-overload,index]
+        declared = infer_goal_indices(obs["observation"], obs["achieved_goal"])  # type: ignore[call-overload,index]
     low = attr("state_low", None)
     high = attr("state_high", None)
     if low is None and high is None:
@@ -135,13 +149,14 @@ def read_goal_spec(env: VecEnv) -> GoalSpec:
         state_dim=state_dim,
         goal_dim=goal_dim,
         action_dim=int(action_space.shape[0]),
-        goal_indices=np.asarray(goal_indices, dtype=np.int64),
+        goal_indices=np.asarray(declared, dtype=np.int64),
         target_indices=np.asarray(attr("target_indices", np.zeros(0)), dtype=np.int64),
         goal_period=attr("goal_period", None),  # type: ignore[arg-type]
         state_low=None if low is None else np.asarray(low, dtype=np.float32),
         state_high=None if high is None else np.asarray(high, dtype=np.float32),
         action_low=np.asarray(action_space.low, dtype=np.float32),
         action_high=np.asarray(action_space.high, dtype=np.float32),
+        goal_indices_inferred=inferred,
     )
     if len(spec.goal_indices) != goal_dim:
         raise ValueError(f"The env declares {len(spec.goal_indices)} goal_indices but desired_goal has {goal_dim} dims.")

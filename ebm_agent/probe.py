@@ -38,10 +38,12 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-from torch import Tensor, nn
+from torch import Tensor
 
+from ebm_agent.agent import EBMPlannerAgent
 from ebm_agent.costs import wrap_array
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
+from ebm_agent.energy import energy_function, transition_energies
 
 __all__ = [
     "FeasibilityResult",
@@ -63,9 +65,6 @@ EnergyFn = Callable[[Tensor, Tensor], Tensor]
 
 LABEL_TOLERANCE = 1e-5
 """A move is feasible when the env lands within this of s' per dim (the point envs' inverse dynamics is exact to 1e-7)."""
-
-EVAL_CHUNK = 65_536
-"""Transitions per energy call, to bound the activation memory."""
 
 
 @dataclass(frozen=True)
@@ -237,7 +236,7 @@ def next_state_rank(
     if not scale > 0:
         raise ValueError(f"next_state_rank: scale must be > 0, got {scale!r}.")
     steps = next_states.astype(np.float64) - states  # [N, D]
-    features = getattr(_energy_fn(agent), "features", None)
+    features = getattr(energy_function(agent), "features", None)
     if features is not None:  # periodic dims: the step across the wrap is the short way round
         dims, period = list(features.dims), features.period
         steps[:, dims] = wrap_array(steps[:, dims], period)
@@ -423,43 +422,6 @@ def measure_reach(env: gym.Env, rng: np.random.Generator, num_states: int = 32) 
 
 
 # ------------------------------------------------------------------------------------------------------------ helpers
-def _energy_fn(agent: Any) -> EnergyFn:
-    """The energy of an agent (its ``energy_model``) or the energy itself."""
-    model = getattr(agent, "energy_model", agent)
-    if not callable(model):
-        raise TypeError(f"expected an agent with an energy_model or an energy callable, got {type(agent).__name__}.")
-    return model  # type: ignore[no-any-return]
-
-
-def transition_energies(agent: Any, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
-    """E(s, s') of [N, D] pairs as float64 [N], without gradients, in chunks and in eval mode (a spectral norm's power
-    iteration must not run); the model's mode is restored.
-
-    :param agent: an agent with ``energy_model``, or an energy callable.
-    :param states: [N, D].
-    :param next_states: [N, D].
-    :return: [N] energies.
-    """
-    model = _energy_fn(agent)
-    was_training = isinstance(model, nn.Module) and model.training
-    parameter = next(model.parameters(), None) if isinstance(model, nn.Module) else None
-    device = parameter.device if parameter is not None else torch.device("cpu")
-    if isinstance(model, nn.Module):
-        model.eval()
-    try:
-        chunks = []
-        with torch.no_grad():
-            for start in range(0, len(states), EVAL_CHUNK):
-                state_chunk = torch.as_tensor(np.ascontiguousarray(states[start : start + EVAL_CHUNK]), device=device)
-                next_chunk = torch.as_tensor(np.ascontiguousarray(next_states[start : start + EVAL_CHUNK]), device=device)
-                chunks.append(model(state_chunk.float(), next_chunk.float()).double().cpu().numpy())  # [chunk]
-    finally:
-        if was_training:
-            assert isinstance(model, nn.Module)
-            model.train()
-    return np.concatenate(chunks) if chunks else np.zeros(0)
-
-
 def _accepts_start(env: gym.Env, state: np.ndarray) -> bool:
     try:
         env.reset(options={"start": state})
@@ -536,7 +498,6 @@ def main(argv: list[str] | None = None) -> tuple[FeasibilityResult | None, NextS
     )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
-    from ebm_agent.agent import EBMPlannerAgent  # only the CLI needs the class
 
     env = gym.make(args.env)
     agent = EBMPlannerAgent.load(args.model, env=env, device="cpu")

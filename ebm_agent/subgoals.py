@@ -36,7 +36,7 @@ from scipy.spatial import cKDTree
 from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.costs import wrap_array
-from ebm_agent.probe import transition_energies
+from ebm_agent.energy import transition_energies
 
 __all__ = [
     "AIMS",
