@@ -4,6 +4,7 @@ that the agent infers shown and overridable (issue 45)."""
 from __future__ import annotations
 
 import warnings
+from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -23,7 +24,7 @@ TINY = {"planner_config": {"num_samples": 8, "iterations": 2}, "horizon": 4}
 class PointGoalEnv(gym.Env):
     """A 2-D point with a goal that declares nothing: no inverse dynamics, no goal_indices (a user's own env)."""
 
-    metadata: dict = {"render_modes": []}
+    metadata: ClassVar[dict] = {"render_modes": []}
 
     def __init__(self) -> None:
         self.observation_space = spaces.Dict(
