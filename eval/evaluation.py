@@ -183,6 +183,13 @@ class RepeatAwareEvalCallback(EvalCallback):
     repeats: bool | None = None
     """Whether the episodes repeat exactly (None until the first evaluation)."""
 
+    _episodes: tuple[list[float], list[int]] | None = None
+    """The lists of scores and lengths that ``evaluate_policy`` fills (seen by its per-step callback)."""
+
+    def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        self._episodes = (locals_["episode_rewards"], locals_["episode_lengths"])
+        super()._log_success_callback(locals_, globals_)
+
     def _on_step(self) -> bool:
         if not (self.eval_freq > 0 and self.n_calls % self.eval_freq == 0) or self.n_eval_episodes <= 1:
             return super()._on_step()
@@ -190,23 +197,26 @@ class RepeatAwareEvalCallback(EvalCallback):
             self.repeats = repeats_exactly(self.model, self.eval_env)
         if not self.repeats:
             return super()._on_step()
-        n = self.n_eval_episodes
-        self.n_eval_episodes = 1
-        # The callbacks after an evaluation must read all n episodes: list them before those callbacks run.
-        inner, self.callback = self.callback, None
+        n, log_path = self.n_eval_episodes, self.log_path
+        # One episode, with the curve's bookkeeping left to this method (SB3's would save a row of one episode beside
+        # rows of n) and the callbacks after an evaluation held back until all n episodes are listed.
+        inner, self.callback, self.log_path, self.n_eval_episodes = self.callback, None, None, 1
+        self._episodes = None
         try:
             continue_training = super()._on_step()
         finally:
-            self.n_eval_episodes, self.callback = n, inner
-        if self.log_path is not None and self.evaluations_results:
-            self.evaluations_results[-1] = list(self.evaluations_results[-1]) * n
-            self.evaluations_length[-1] = list(self.evaluations_length[-1]) * n
+            self.n_eval_episodes, self.callback, self.log_path = n, inner, log_path
+        if log_path is not None and self._episodes is not None:
+            scores, lengths = self._episodes
+            self.evaluations_timesteps.append(self.num_timesteps)
+            self.evaluations_results.append(list(scores) * n)
+            self.evaluations_length.append(list(lengths) * n)
             extra: dict[str, Any] = {}
-            if len(self.evaluations_successes) == len(self.evaluations_results):
-                self.evaluations_successes[-1] = list(self.evaluations_successes[-1]) * n
+            if self._is_success_buffer:
+                self.evaluations_successes.append(list(self._is_success_buffer) * n)
                 extra["successes"] = self.evaluations_successes
             np.savez(
-                self.log_path,
+                log_path,
                 timesteps=self.evaluations_timesteps,
                 results=self.evaluations_results,
                 ep_lengths=self.evaluations_length,

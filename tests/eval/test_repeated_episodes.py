@@ -82,11 +82,11 @@ def test_the_learning_curve_lists_the_one_episode_for_all(tmp_path):
     )
     callback.init_callback(agent)
     callback.model = counted  # the evaluation calls predict on the callback's model
-    assert callback.on_step()
-    assert callback.repeats and counted.starts == 1
+    assert callback.on_step() and callback.on_step()  # two evaluations: a curve of two rows
+    assert callback.repeats and counted.starts == 2
     with np.load(tmp_path / "evaluations.npz") as data:
-        assert data["results"].shape == (1, 3) and len(set(data["results"][0])) == 1
-        assert data["successes"].shape == (1, 3)
+        assert data["results"].shape == (2, 3) and len(set(data["results"][0])) == 1
+        assert data["ep_lengths"].shape == (2, 3) and data["successes"].shape == (2, 3)
 
 
 def test_a_run_records_how_many_episodes_it_evaluated(tmp_path):
@@ -123,3 +123,22 @@ def test_agents_that_do_not_declare_it_run_every_episode(agent):
         verbose=0,
     )
     assert not repeats_exactly(model, make_vec_env("ebm/Particle-v0", n_envs=1, seed=0, env_kwargs=FIXED))
+
+
+def test_an_online_run_with_several_evaluations_lists_each_for_all_its_episodes(tmp_path):
+    job = Job(
+        "ebm/Particle-v0",
+        "ebm",
+        0,
+        timesteps=40,
+        eval_freq=20,
+        eval_episodes=3,
+        out_dir=str(tmp_path),
+        hyperparams=TINY,
+        eval_env_kwargs=FIXED,
+    )
+    result = run_job(job)
+    assert result.ok, result.error
+    with np.load(job.run_dir / "evaluations.npz") as data:
+        assert data["timesteps"].tolist() == [20, 40] and data["results"].shape == (2, 3)
+    assert json.loads((job.run_dir / "metrics.json").read_text())["evaluated_episodes"] == 1
