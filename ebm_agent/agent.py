@@ -23,13 +23,13 @@ from ebm_agent.costs import (
     RampedGoalEnergy,
     RewardGoalEnergy,
     VelocityPrior,
-    wrap_array,
 )
 from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
 from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss, info_nce_loss, reach_candidates
+from ebm_agent.moves import MoveStatistics, state_periods
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
@@ -58,14 +58,18 @@ class CostConfig:
         the particle/maze/Reacher reward: a linear pull that keeps infeasible shortcuts expensive yet is precise at the
         goal), ``"gaussian"`` (paper Eq. 6, (s_T - g)^2) or ``"ramped"`` (the original code's time-ramped goal).
     :param goal_weight: weight of the goal term (g_coeff).
-    :param eval_goal_weight: goal weight used by ``predict`` (the original evaluated the arm with 10); None = same.
+    :param eval_goal_weight: goal weight used by ``predict`` (None: ``goal_weight``). The default 10 keeps an agent
+        trained on few transitions from being held by its young energy, which still rises with how rarely a state was
+        seen (particle, 2,000 transitions: evaluated at the training weight 1 it failed on 6 of 10 seeds, at 10 on
+        none; docs/agent.md); the original evaluated the arm with 10. The ``paper`` preset evaluates at the training
+        weight, as the original's particle, maze and Reacher did.
     :param velocity_weight: weight of the velocity prior (v_coeff).
     :param acceleration_weight: weight of the acceleration prior (a_coeff).
     """
 
     goal_energy: str = "reward"
     goal_weight: float = 1.0
-    eval_goal_weight: float | None = None
+    eval_goal_weight: float | None = 10.0
     velocity_weight: float = 0.0
     acceleration_weight: float = 1.0
 
@@ -203,10 +207,9 @@ class EBMPlannerAgent(PlannerAgentBase):
             raise ValueError(f"perturb_scales must be a non-empty sequence of finite scales > 0, got {perturb_scales!r}.")
         self.perturbed_negatives = perturbed_negatives
         self.perturb_scales = scales
-        self._move_stats: np.ndarray | None = None  # [3, D]: count, sum and sum of squares of the real moves s' - s
-        self._move_std: np.ndarray | None = None  # [D] their std as of the current gradient step
-        self._reach_radius: torch.Tensor | None = None  # [D] largest real |s' - s| seen, for loss="infonce_reach"
-        self._hard_reach: np.ndarray | None = None  # [D] the same, for online.hard_negative_reach
+        # The real moves s' - s of every transition learnt from (online segments, offline datasets), periodic dims
+        # wrapped: the reach box, the hard-negative clip and the move normalisation all read their scale here.
+        self._moves: MoveStatistics | None = None
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         self.extra_energies: list[ExtraEnergy] = []
@@ -305,10 +308,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             "plan_cost",
             "extra_energies",
             "_negative_radius",
-            "_reach_radius",
-            "_hard_reach",
-            "_move_stats",
-            "_move_std",
+            "_moves",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -383,7 +383,9 @@ class EBMPlannerAgent(PlannerAgentBase):
         return float(self.l2_coeff + weight * (final - self.l2_coeff))
 
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
-        positives = self._replay_positives(self._fresh_positives(segments))
+        fresh = self._fresh_positives(segments)
+        self._record_real_moves(fresh.states, fresh.next_states)
+        positives = self._replay_positives(fresh)
         # Negatives: the planned transitions that were attempted, up to and including the one that deviated; the
         # planned transitions after the deviation are ignored (paper Sec. 3.3).
         neg_states = np.concatenate([s.planned[:-1] for s in segments])  # [M, D]
@@ -437,8 +439,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         Step i of a segment failed when max |planned[i + 1] - real_next_states[i]| over the model dims exceeds
         ``online.hard_negative_threshold``: the agent aimed from the real state at the planned one and the env went
         elsewhere. With ``online.hard_negative_reach`` the planned state is first clipped into the reach box of the
-        real moves seen so far (``self._hard_reach``). The fresh failed steps are stored after the replayed ones are
-        drawn (as the planned negatives).
+        real moves seen so far (:meth:`real_moves`, which must have been given the segments' transitions). The fresh
+        failed steps are stored after the replayed ones are drawn (as the planned negatives).
 
         :param segments: the finished segments.
         :return: a batch of states s_t [H, D], next_states s'_plan [H, D] and actions s'_real [H, D] (the real next
@@ -451,9 +453,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         real_next = np.concatenate([s.real_next_states for s in segments])  # [k, D]
         planned_next = np.concatenate([s.planned[1:] for s in segments])  # [k, D]
         if self.online.hard_negative_reach:
-            step = np.abs(real_next - states).max(axis=0)  # [D]
-            self._hard_reach = step if self._hard_reach is None else np.maximum(self._hard_reach, step)
-            planned_next = states + np.clip(planned_next - states, -self._hard_reach, self._hard_reach)  # [k, D]
+            reach = self.real_moves.largest  # [D]
+            planned_next = states + np.clip(planned_next - states, -reach, reach)  # [k, D]
         failed = self._deviation(real_next, planned_next, reduce="max") > self.online.hard_negative_threshold  # [k]
         fresh = TransitionBatch(states[failed], planned_next[failed], real_next[failed])  # [F, D] each
         replay_count = min(len(buffer), int(self.online.hard_negative_batch))
@@ -494,18 +495,17 @@ class EBMPlannerAgent(PlannerAgentBase):
         """
         energy = self.energy_model
         l2 = self.l2_coeff if l2_coeff is None else l2_coeff
-        self._move_std = None
         if self.perturbed_negatives > 0 or self.energy_config.move_input:
-            self._move_std = self._update_move_statistics(pos_states, pos_next)
+            moves = self.real_moves
+            energy.set_move_statistics(moves.mean, moves.std)
         self.policy.set_training_mode(True)
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         states = as_tensor(pos_states)  # [P, D]
         energy_pos = energy(states, as_tensor(pos_next))  # [P]
         if self.loss in ("infonce_reach", "infonce_perturb"):
             if self.loss == "infonce_reach":
-                candidates = reach_candidates(
-                    states, self._update_reach_radius(pos_states, pos_next), self.reach_candidates, self._generator
-                )  # [P, K, D]
+                radius = torch.as_tensor(self.real_moves.largest, device=self.device).clamp_min(1e-6)  # [D]
+                candidates = reach_candidates(states, radius, self.reach_candidates, self._generator)  # [P, K, D]
             else:
                 candidates = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, K, D]
             energy_neg = energy(states[:, None, :].expand_as(candidates), candidates)  # [P, K]
@@ -594,27 +594,21 @@ class EBMPlannerAgent(PlannerAgentBase):
         }
         return loss, stats
 
-    def _update_move_statistics(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
-        """Add real transitions to the running mean and std of the real moves s' - s (periodic dims wrapped), pass them
-        to the energy (``EnergyConfig.move_input``) and return the std.
+    @property
+    def real_moves(self) -> MoveStatistics:
+        """The statistics of the real moves s' - s of every transition learnt from (periodic dims wrapped).
 
-        :param states: [P, D] real states.
-        :param next_states: [P, D] their real next states.
-        :return: [D] std of the moves so far (+1e-6).
+        :raises RuntimeError: before any transition was learnt from.
         """
-        spec = self.goal_spec
-        assert spec is not None
-        moves = (next_states - states).astype(np.float64)  # [P, D]
-        if spec.goal_period is not None:
-            period, dims = spec.goal_period, spec.goal_indices
-            moves[:, dims] = wrap_array(moves[:, dims], period)
-        update = np.stack([np.full(moves.shape[1], len(moves), dtype=np.float64), moves.sum(0), np.square(moves).sum(0)])
-        self._move_stats = update if self._move_stats is None else self._move_stats + update
-        count, total, squares = self._move_stats
-        mean = total / count
-        std = np.sqrt(np.maximum(squares / count - np.square(mean), 0.0)) + 1e-6  # [D]
-        self.energy_model.set_move_statistics(mean, std)
-        return std
+        if self._moves is None:
+            raise RuntimeError("no real transition recorded yet: learn() or learn_offline() records them.")
+        return self._moves
+
+    def _record_real_moves(self, states: np.ndarray, next_states: np.ndarray) -> None:
+        """Add real transitions ([P, D] each) to :attr:`real_moves`."""
+        if self._moves is None:
+            self._moves = MoveStatistics(state_periods(self.goal_spec, np.asarray(states).shape[1]))
+        self._moves.update(states, next_states)
 
     def _perturbed_next_states(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
         """``perturbed_negatives`` near misses of each real next state: s' + N(0, (c std(s' - s))^2), c from
@@ -625,25 +619,13 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param next_states: [P, D] their real next states.
         :return: [P, M, D] perturbed next states (float32).
         """
-        std = self._move_std if self._move_std is not None else self._update_move_statistics(states, next_states)
+        std = self.real_moves.std  # [D]
         shape = (len(states), self.perturbed_negatives, states.shape[1])
         scales = torch.as_tensor(self.perturb_scales, dtype=torch.float32, device=self.device)
         pick = torch.randint(len(self.perturb_scales), shape[:2], generator=self._generator, device=self.device)
         noise = torch.randn(shape, generator=self._generator, device=self.device) * scales[pick][..., None]  # [P, M, D]
         noise = noise * torch.as_tensor(std, dtype=torch.float32, device=self.device)
         return (torch.as_tensor(next_states, dtype=torch.float32, device=self.device)[:, None, :] + noise).cpu().numpy()
-
-    def _update_reach_radius(self, states: np.ndarray, next_states: np.ndarray) -> torch.Tensor:
-        """The half-width of the reach box: the largest real |s' - s| per dim seen so far (the dataset's offline).
-
-        :param states: [P, D] real states.
-        :param next_states: [P, D] real next states.
-        :return: [D] radius, floored at 1e-6 so that a dim that never moved still gets candidates.
-        """
-        step = torch.as_tensor(np.abs(next_states - states).max(axis=0), device=self.device)  # [D]
-        radius = step if self._reach_radius is None else torch.maximum(self._reach_radius, step)
-        self._reach_radius = radius.clamp_min(1e-6)
-        return self._reach_radius
 
     def _adapt_iterations(self, gap: float) -> None:
         """The original's adaptive planning budget: more iterations while negatives stay far above positives."""
@@ -687,6 +669,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param tb_log_name: TensorBoard run name.
         :return: self.
         """
+        # The original's box, unwrapped even on periodic dims (the recorded paper-preset Reacher rows were made with it).
         radius = 2.0 * np.abs(dataset.next_states - dataset.states).max(axis=0) if negative_radius is None else negative_radius
         spec = self.goal_spec
         assert spec is not None
@@ -694,8 +677,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device
         )
         self._num_candidates = num_candidates
-        if self.loss == "infonce_reach":
-            self._update_reach_radius(dataset.states, dataset.next_states)
+        self._record_real_moves(dataset.states, dataset.next_states)
         return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:

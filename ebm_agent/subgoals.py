@@ -37,6 +37,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.costs import wrap_array
 from ebm_agent.energy import transition_energies
+from ebm_agent.moves import state_periods
 
 __all__ = [
     "AIMS",
@@ -237,7 +238,7 @@ class GraphSubgoals:
         if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
             raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
         rng = np.random.default_rng(seed)
-        period = _periods(agent, states.shape[1])  # [D] or None
+        period = state_periods(agent.goal_spec, states.shape[1])  # [D] or None
         step = np.maximum(np.abs(wrap_array(next_states - states, period)).max(axis=0), 1e-6)  # [D]
         side, around = _grid(step, cell, period)  # [D] each
         cells = _cells(states, side, around)  # [M, D]
@@ -615,18 +616,6 @@ class FrontierSubgoals:
         cell = self._frontier_cells[best]  # the push counts against F wherever the agent is (it may be past F)
         self.plan_counts[cell] = self.plan_counts.get(cell, 0) + 1
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
-
-
-def _periods(agent: Any, dims: int) -> np.ndarray | None:
-    """[D] the period of each state dim of ``agent``'s states (0: not periodic), or None where none is: the goal dims
-    when its ``goal_spec`` has a ``goal_period`` (the convention of the agent's costs and energy)."""
-    spec: Any = agent.goal_spec
-    period = getattr(spec, "goal_period", None)
-    if period is None:
-        return None
-    periods = np.zeros(dims, dtype=np.float32)
-    periods[np.asarray(spec.goal_indices)] = float(period)
-    return periods
 
 
 def _grid(step: np.ndarray, cell: float, period: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

@@ -101,9 +101,10 @@ def test_reach_clipping_keeps_the_refused_in_reach_move_and_drops_executed_long_
     _, fresh = plain._hard_negatives([_segment(states, planned_next, real_next)])
     assert fresh == 2  # both jumps missed
     clipped = _agent({"hard_negatives": True, "hard_negative_reach": True})
+    clipped._record_real_moves(states, real_next)
     batch, fresh = clipped._hard_negatives([_segment(states, planned_next, real_next)])
     assert fresh == 1 and batch is not None
-    np.testing.assert_allclose(clipped._hard_reach, [0.05, 0.0], atol=1e-6)
+    np.testing.assert_allclose(clipped.real_moves.largest, [0.05, 0.0], atol=1e-6)
     np.testing.assert_allclose(batch.next_states, [[-0.47, -0.8]], atol=1e-6)  # one step into the wall
 
 

@@ -24,6 +24,7 @@ def test_perturbed_next_states_follow_the_real_moves_scale() -> None:
     states = rng.uniform(-1, 1, (400, 4)).astype(np.float32)
     moves = rng.normal(0.0, [0.01, 0.02, 0.3, 0.5], (400, 4)).astype(np.float32)
     next_states = states + moves
+    agent._record_real_moves(states, next_states)
     perturbed = agent._perturbed_next_states(states, next_states)
     assert perturbed.shape == (400, 50, 4)
     noise_std = (perturbed - next_states[:, None, :]).reshape(-1, 4).std(axis=0)
@@ -32,9 +33,10 @@ def test_perturbed_next_states_follow_the_real_moves_scale() -> None:
     agent = make_agent(perturbed_negatives=4, perturb_scales=(1.0,))
     wrap_states = np.tile(np.array([[0.99, 0.0, 0.0, 0.0], [-0.99, 0.0, 0.0, 0.0]], np.float32), (50, 1))
     wrap_next = np.tile(np.array([[-0.99, 0.0, 0.0, 0.0], [0.99, 0.0, 0.0, 0.0]], np.float32), (50, 1))
-    agent._perturbed_next_states(wrap_states, wrap_next)
-    count, _total, squares = agent._move_stats
-    assert np.sqrt(squares[0] / count[0]) == pytest.approx(0.02, abs=1e-5)
+    agent._record_real_moves(wrap_states, wrap_next)
+    assert agent.real_moves.count == 100
+    assert agent.real_moves.std[0] == pytest.approx(0.02, abs=1e-5)
+    assert agent.real_moves.largest[0] == pytest.approx(0.02, abs=1e-5)  # the reach box and hard-negative clip too
 
 
 def test_options_are_validated_and_off_by_default() -> None:

@@ -70,8 +70,7 @@ def test_reach_infonce_trains_offline_and_online() -> None:
     )
     data = collect_random_transitions(gym.make("ebm/Maze-v0"), 300, seed=0)
     agent.learn_offline(data, epochs=1, log_interval=0)
-    assert agent._reach_radius is not None
-    assert torch.allclose(agent._reach_radius, torch.as_tensor(np.abs(data.next_states - data.states).max(axis=0)))
+    np.testing.assert_array_equal(agent.real_moves.largest, np.abs(data.next_states - data.states).max(axis=0))
     stats = agent._gradient_step(data.states[:32], data.next_states[:32], data.states[:0], data.next_states[:0])
     assert {"loss", "loss_anchor", "accuracy"} <= set(stats) and np.isfinite(stats["loss"])
     agent.learn(total_timesteps=30)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from benchmarks import eval_goal_weight
 from benchmarks.cli import main
 
 
@@ -21,3 +22,9 @@ def test_bad_env_counts_are_refused(capsys) -> None:
     with pytest.raises(SystemExit):
         main(["--envs", "0"])
     assert "--envs must be >= 1" in capsys.readouterr().err
+
+
+def test_eval_goal_weight_benchmark_prints_one_row_per_seed(capsys: pytest.CaptureFixture[str]) -> None:
+    assert eval_goal_weight.main(["--timesteps", "0", "--seeds", "0", "--episodes", "1", "--weights", "1", "10"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| 0 |")]
+    assert len(rows) == 1 and rows[0].count("success") == 2

@@ -69,7 +69,10 @@ def test_the_preset_reaches_the_agent_the_collector_and_the_digest() -> None:
     assert collector_settings(directed) == {**PAPER_EBM, "horizon": 5}
     assert job_fingerprint(job) == job_fingerprint(replace(job, preset="fast"))  # the digest tells them apart
     assert defaults_digest(job) != defaults_digest(replace(job, preset="fast"))
-    assert defaults_digest(job) == defaults_digest(replace(job, preset=""))  # the paper preset is the defaults
+    # The defaults departed from the paper (evaluation goal weight 10); the paper preset keeps the recorded digest.
+    assert defaults_digest(job) != defaults_digest(replace(job, preset=""))
+    assert agent_defaults_digest("ebm", "ebm/Particle-v0", "paper") == "89db7682350f5b22"
+    assert agent_defaults_digest("ebm", "ebm/Particle-v0", "fast") == "22984ac86eb5780c"
     assert agent_defaults_digest("ppo", "ebm/Particle-v0", "paper") == agent_defaults_digest("ppo", "ebm/Particle-v0")
     with pytest.raises(ValueError, match=r"Job\.preset"):
         replace(job, preset="faster")
