@@ -29,7 +29,6 @@ from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
 from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss, info_nce_loss, reach_candidates
-from ebm_agent.moves import MoveStatistics, state_periods
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
@@ -207,9 +206,6 @@ class EBMPlannerAgent(PlannerAgentBase):
             raise ValueError(f"perturb_scales must be a non-empty sequence of finite scales > 0, got {perturb_scales!r}.")
         self.perturbed_negatives = perturbed_negatives
         self.perturb_scales = scales
-        # The real moves s' - s of every transition learnt from (online segments, offline datasets), periodic dims
-        # wrapped: the reach box, the hard-negative clip and the move normalisation all read their scale here.
-        self._moves: MoveStatistics | None = None
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         self.extra_energies: list[ExtraEnergy] = []
@@ -308,7 +304,6 @@ class EBMPlannerAgent(PlannerAgentBase):
             "plan_cost",
             "extra_energies",
             "_negative_radius",
-            "_moves",
         ]
 
     def _get_torch_save_params(self) -> tuple[list[str], list[str]]:
@@ -383,8 +378,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         return float(self.l2_coeff + weight * (final - self.l2_coeff))
 
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
-        fresh = self._fresh_positives(segments)
-        self._record_real_moves(fresh.states, fresh.next_states)
+        fresh = self._fresh_positives(segments)  # their real moves are in real_moves already (_run_online)
         positives = self._replay_positives(fresh)
         # Negatives: the planned transitions that were attempted, up to and including the one that deviated; the
         # planned transitions after the deviation are ignored (paper Sec. 3.3).
@@ -594,22 +588,6 @@ class EBMPlannerAgent(PlannerAgentBase):
         }
         return loss, stats
 
-    @property
-    def real_moves(self) -> MoveStatistics:
-        """The statistics of the real moves s' - s of every transition learnt from (periodic dims wrapped).
-
-        :raises RuntimeError: before any transition was learnt from.
-        """
-        if self._moves is None:
-            raise RuntimeError("no real transition recorded yet: learn() or learn_offline() records them.")
-        return self._moves
-
-    def _record_real_moves(self, states: np.ndarray, next_states: np.ndarray) -> None:
-        """Add real transitions ([P, D] each) to :attr:`real_moves`."""
-        if self._moves is None:
-            self._moves = MoveStatistics(state_periods(self.goal_spec, np.asarray(states).shape[1]))
-        self._moves.update(states, next_states)
-
     def _perturbed_next_states(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
         """``perturbed_negatives`` near misses of each real next state: s' + N(0, (c std(s' - s))^2), c from
         ``perturb_scales``, std the running std of the real moves (updated with these transitions unless the gradient
@@ -677,7 +655,6 @@ class EBMPlannerAgent(PlannerAgentBase):
             np.broadcast_to(np.asarray(radius, np.float32), (spec.state_dim,)).copy(), device=self.device
         )
         self._num_candidates = num_candidates
-        self._record_real_moves(dataset.states, dataset.next_states)
         return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:

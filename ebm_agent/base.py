@@ -29,6 +29,7 @@ from ebm_agent.config import OnlineConfig, learn_budgets, make_config
 from ebm_agent.datasets import TransitionDataset, iterate_minibatches
 from ebm_agent.goal_spec import GoalSpec, check_finite_observation, check_spaces, env_inverse_dynamics, read_goal_spec
 from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
+from ebm_agent.moves import MoveStatistics, state_periods
 from ebm_agent.planner import shift_plan
 from ebm_agent.policy import PlanningPolicy
 from ebm_agent.subgoals import EXPLORE_DEFAULTS, FrontierRebuild, FrontierSubgoals, GraphSubgoals, check_long_horizon
@@ -232,6 +233,11 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.num_plans = 0
         self._n_updates = 0
         self._online_loop: OnlineLoopState | None = None
+        # The real moves s' - s of every transition learnt from (online segments, offline datasets), periodic dims
+        # wrapped: the measured step of online.threshold_units="step", the EBM's reach box, hard-negative clip and
+        # move normalisation all read their scale here. Saved with the agent, so a loaded one keeps its step.
+        self._moves: MoveStatistics | None = None
+        self._warned_no_step = False
         self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
         self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
         self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
@@ -465,20 +471,36 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         plans[:, :, dims] += (turns * period)[:, None, :].astype(plans.dtype)
 
     def _deviation(self, real: np.ndarray, planned: np.ndarray, reduce: str) -> np.ndarray:
-        """Distance between real and planned states over the model dims (target dims excluded).
+        """Distance between real and planned states over the model dims (target dims excluded), in the unit of
+        ``online.threshold_units`` (each dim's gap divided by its measured step with ``"step"``).
 
         :param real: [N, D].
         :param planned: [N, D].
         :param reduce: "max" (training rule) or "mean" (evaluation rule).
-        :return: [N].
+        :return: [N]; NaN with ``"step"`` units before a real move was recorded (no comparison holds).
         """
         spec = self.goal_spec
         assert spec is not None
         gap = np.abs(real - planned)  # [N, D]
         dims = spec.goal_indices
         gap[:, dims] = self._goal_gaps(real[:, dims], planned[:, dims])
-        gap = gap[:, spec.model_dims]
+        gap = (gap / self._threshold_unit())[:, spec.model_dims]
         return gap.max(axis=1) if reduce == "max" else gap.mean(axis=1)
+
+    def _threshold_unit(self) -> np.ndarray | float:
+        """What the state gaps compared with the ``online`` thresholds are divided by, per state dim.
+
+        :return: 1.0 with ``online.threshold_units="state"``; with ``"step"``, [D] the largest real |s' - s| per dim
+            recorded so far (:attr:`real_moves`; a dim that never moved takes a thousandth of the largest dim's
+            step, so that moving it counts as far), or NaN before any was recorded.
+        """
+        if self.online.threshold_units == "state":
+            return 1.0
+        if self._moves is None or self._moves.count == 0:
+            return float("nan")
+        step = self._moves.largest.astype(np.float64)  # [D]
+        floor = 1e-3 * float(step.max()) if step.max() > 0 else 1.0
+        return np.maximum(step, floor)
 
     def _goal_gaps(self, points: np.ndarray, goals: np.ndarray) -> np.ndarray:
         """|points - goals| per goal dim; periodic goal dims (Reacher's normalised angles) the short way round the
@@ -602,13 +624,22 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if episode_start is not None:
             need |= np.asarray(episode_start, dtype=bool).reshape(-1)
         has_plan = ~need
+        if has_plan.any() and self.online.threshold_units == "step" and self._moves is None and not self._warned_no_step:
+            self._warned_no_step = True
+            warnings.warn(
+                f"{type(self).__name__}.predict: online.threshold_units='step' but no real move was recorded yet (the "
+                "agent learnt nothing), so there is no measured step: plans run their course without the drift and "
+                "arrival replans. learn() or learn_offline() measures it.",
+                stacklevel=2,
+            )
         if has_plan.any():
             idx = np.where(has_plan)[0]
             drift = self._deviation(states[idx], plans[idx, steps[idx]], reduce="mean")
             need[idx[drift > self.online.replan_threshold]] = True
             if self.online.arrival_threshold is not None:  # arrived: the rest of the plan would only hover
                 if self.online.arrival_at == "aim":
-                    left = self._goal_gaps(states[idx][:, spec.goal_indices], aims[idx]).max(axis=1)  # [K]
+                    unit = np.broadcast_to(self._threshold_unit(), (spec.state_dim,))[spec.goal_indices]  # [G]
+                    left = (self._goal_gaps(states[idx][:, spec.goal_indices], aims[idx]) / unit).max(axis=1)  # [K]
                 else:
                     left = self._deviation(states[idx], plans[idx, horizon], reduce="max")  # [K]
                 need[idx[left <= self.online.arrival_threshold]] = True
@@ -775,6 +806,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
                 warm[i] = (not dones[i]) and plan_cost[i] <= self.online.reinit_energy
                 shift[i], need[i] = steps[i], True
             if segments:
+                fresh = self._fresh_positives(segments)  # before training: the hard-negative clip reads their moves
+                self._record_real_moves(fresh.states, fresh.next_states)
                 stats = self._train_on_segments(segments)
                 self._n_updates += 1
                 for key, value in stats.items():
@@ -899,6 +932,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if not self._custom_logger:
             name = tb_log_name or f"{self.default_tb_log_name}_offline"
             self._logger = configure_logger(self.verbose, self.tensorboard_log, name, True)
+        self._record_real_moves(dataset.states, dataset.next_states)
         rng = np.random.default_rng(self._base_seed())
         start = time.perf_counter()
         for epoch in range(epochs):
@@ -914,6 +948,22 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if self.subgoal_graph is not None:
             self.build_subgoals(dataset.states, dataset.next_states)
         return self
+
+    @property
+    def real_moves(self) -> MoveStatistics:
+        """The statistics of the real moves s' - s of every transition learnt from (periodic dims wrapped).
+
+        :raises RuntimeError: before any transition was learnt from.
+        """
+        if self._moves is None:
+            raise RuntimeError("no real transition recorded yet: learn() or learn_offline() records them.")
+        return self._moves
+
+    def _record_real_moves(self, states: np.ndarray, next_states: np.ndarray) -> None:
+        """Add real transitions ([P, D] each) to :attr:`real_moves`."""
+        if self._moves is None:
+            self._moves = MoveStatistics(state_periods(self.goal_spec, np.asarray(states).shape[1]))
+        self._moves.update(states, next_states)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         """One gradient step on a minibatch of dataset transitions ([B, D], [B, D], [B, A]). Implemented by subclasses."""

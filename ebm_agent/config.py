@@ -16,6 +16,9 @@ HARD_NEGATIVE_LOSSES = ("margin", "negatives")
 ARRIVAL_AT = ("plan_end", "aim")
 """Values of ``OnlineConfig.arrival_at``."""
 
+THRESHOLD_UNITS = ("state", "step")
+"""Values of ``OnlineConfig.threshold_units``."""
+
 
 @dataclass
 class OnlineConfig:
@@ -93,6 +96,15 @@ class OnlineConfig:
         evaluation plans on the sharp one. EBM agent only; pretraining uses ``l2_coeff``.
     :param l2_anneal_start: fraction of the budget where the anneal begins (0.5).
     :param l2_anneal_end: fraction of the budget where it reaches ``l2_final`` (0.8); equal to the start: a switch.
+    :param threshold_units: the unit of the four thresholds on a gap between a real and a planned (or aimed-at)
+        state, ``deviation_threshold``, ``replan_threshold``, ``arrival_threshold`` and ``hard_negative_threshold``:
+        ``"state"`` (the default, the original's), the env's own state units; ``"step"``, the env's measured real
+        step: each dim's gap is divided by the largest real |s' - s| of that dim the agent has learnt from
+        (:attr:`~ebm_agent.base.PlannerAgentBase.real_moves`, periodic dims wrapped) before the gaps are reduced
+        over the dims, so that the same thresholds mean the same on an env of any scale (the maze's 0.05 replan
+        drift is 1 step, its 0.025 arrival 0.5 and its 0.01 hard-negative miss 0.2). Until a real move has been
+        recorded there is no step: the rules that read these thresholds are skipped (a plan runs its course) and
+        ``predict`` warns once.
     """
 
     deviation_threshold: float = 0.7
@@ -124,6 +136,7 @@ class OnlineConfig:
     l2_final: float | None = None
     l2_anneal_start: float = 0.5
     l2_anneal_end: float = 0.8
+    threshold_units: str = "state"
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -132,7 +145,11 @@ class OnlineConfig:
         for name in ("hard_negative_weight", "hard_negative_margin", "hard_negative_batch"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"OnlineConfig.{name} must be >= 0, got {getattr(self, name)!r}.")
-        for name, choices in (("hard_negative_loss", HARD_NEGATIVE_LOSSES), ("arrival_at", ARRIVAL_AT)):
+        for name, choices in (
+            ("hard_negative_loss", HARD_NEGATIVE_LOSSES),
+            ("arrival_at", ARRIVAL_AT),
+            ("threshold_units", THRESHOLD_UNITS),
+        ):
             if getattr(self, name) not in choices:
                 raise ValueError(f"OnlineConfig.{name} must be one of {choices}, got {getattr(self, name)!r}.")
         for name in ("deviation_threshold", "replan_threshold"):

@@ -233,9 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--preset",
         choices=("", "paper", "fast"),
         help="agent preset of the EBM agent and Action FF (ebm_agent.presets): paper = the original code's settings "
-        "(80 MPPI iterations for every plan, today's defaults), fast = 3 iterations for warm-started and 20 for fresh "
-        "training plans (5-15x cheaper learning; lower scores on the Sawyer); --hyperparams apply over it "
-        "(default: the library's defaults)",
+        "in full (80 MPPI iterations for every plan, the evaluation goal weight = the training weight), fast = 3 "
+        "iterations for warm-started and 20 for fresh training plans (5-15x cheaper learning; lower scores on the "
+        "Sawyer); --hyperparams apply over it (default: the library's defaults)",
     )
     parser.add_argument(
         "-params",
