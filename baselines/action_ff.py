@@ -19,6 +19,7 @@ from ebm_agent.fast_mlp import WorkspaceMLP
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.networks import build_mlp
 from ebm_agent.policy import PlanningPolicy
+from ebm_agent.subgoals import ExploreConfig, SubgoalGraphConfig
 
 
 class ForwardDynamicsModel(nn.Module):
@@ -229,8 +230,8 @@ class ActionFFAgent(PlannerAgentBase):
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics | None = None,
         standardize_outputs: bool | None = True,
-        subgoal_graph: dict[str, Any] | None = None,
-        explore: dict[str, Any] | None = None,
+        subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
+        explore: ExploreConfig | dict[str, Any] | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,

@@ -32,6 +32,7 @@ from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_l
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
+from ebm_agent.subgoals import ExploreConfig, SubgoalGraphConfig
 
 SelfEBMPlannerAgent = TypeVar("SelfEBMPlannerAgent", bound="EBMPlannerAgent")
 
@@ -166,8 +167,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics | None = None,
         image_log_interval: int = 1000,
-        subgoal_graph: dict[str, Any] | None = None,
-        explore: dict[str, Any] | None = None,
+        subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
+        explore: ExploreConfig | dict[str, Any] | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,

@@ -32,7 +32,15 @@ from ebm_agent.inverse_dynamics import InverseDynamics, make_inverse_dynamics
 from ebm_agent.moves import MoveStatistics, state_periods
 from ebm_agent.planner import shift_plan
 from ebm_agent.policy import PlanningPolicy
-from ebm_agent.subgoals import EXPLORE_DEFAULTS, FrontierRebuild, FrontierSubgoals, GraphSubgoals, check_long_horizon
+from ebm_agent.subgoals import (
+    ExploreConfig,
+    FrontierRebuild,
+    FrontierSubgoals,
+    GraphSubgoals,
+    SubgoalGraphConfig,
+    check_long_horizon,
+    long_horizon_configs,
+)
 
 SelfPlannerAgent = TypeVar("SelfPlannerAgent", bound="PlannerAgentBase")
 
@@ -153,16 +161,18 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         construction), ``"mlp"`` (learned), ``"rls"`` (recursive least squares), an
         :class:`~ebm_agent.inverse_dynamics.InverseDynamics` instance, or None (the default): the env's where it
         has them, else ``LEARNED_INVERSE_DYNAMICS``, with a warning that says so.
-    :param subgoal_graph: long-horizon goal reaching (issue #36): keyword arguments of
-        :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}`` for its defaults), with which the agent
+    :param subgoal_graph: long-horizon goal reaching (issue #36): a :class:`~ebm_agent.subgoals.SubgoalGraphConfig`
+        or a dict of its fields, the keywords of :meth:`~ebm_agent.subgoals.GraphSubgoals.from_transitions` (``{}``
+        for its defaults), with which the agent
         builds a graph over the real transitions it learned from at the end of ``learn_offline`` (the dataset's) and
         of ``learn`` (its replay buffer's), and then aims each plan at a subgoal along the graph's shortest path to
         the goal (``self.subgoals``). Its edges come from the learned energy (``"edges": "energy"``, the default; the
         EBM agent), from the moves the agent made (``"real"``; any agent) or both. None (the default, the paper's):
         plans aim at the goal. The graph is not saved with the agent: after ``load``, call :meth:`build_subgoals`.
-    :param explore: frontier exploration during ``learn`` (issue #36): a dict of ``every`` (transitions between
-        rebuilds of the graph over the replay buffer, 1000), ``goal_heuristic`` (1.0; 0 explores without regard to
-        the goal) and ``revisit_cost`` (1.0) of :class:`~ebm_agent.subgoals.FrontierSubgoals`: the plans aim along the
+    :param explore: frontier exploration during ``learn`` (issue #36): an :class:`~ebm_agent.subgoals.ExploreConfig`
+        or a dict of its fields, ``every`` (transitions between rebuilds of the graph over the replay buffer, 1000),
+        ``goal_heuristic`` (1.0; 0 explores without regard to the goal) and ``revisit_cost`` (1.0) of
+        :class:`~ebm_agent.subgoals.FrontierSubgoals`: the plans aim along the
         graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
         ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
         graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
@@ -188,8 +198,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         horizon: int = 10,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics | None = None,
-        subgoal_graph: dict[str, Any] | None = None,
-        explore: dict[str, Any] | None = None,
+        subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
+        explore: ExploreConfig | dict[str, Any] | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -198,7 +208,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         device: torch.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
-        check_long_horizon(subgoal_graph, explore, self)
+        graph_config, explore_config = long_horizon_configs(subgoal_graph, explore)
+        check_long_horizon(graph_config, explore_config, self)
         if isinstance(policy, str) and policy not in self.policy_aliases:
             raise ValueError(
                 f"{type(self).__name__} takes policy 'MultiInputPolicy' (its networks plan over the Dict observation "
@@ -240,8 +251,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self._warned_no_step = False
         self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
         self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
-        self.subgoal_graph = None if subgoal_graph is None else dict(subgoal_graph)
-        self.explore = None if explore is None else {**EXPLORE_DEFAULTS, **explore}
+        self.subgoal_graph = graph_config
+        self.explore = explore_config
         self.goal_indices = None if goal_indices is None else [int(index) for index in goal_indices]
         if _init_setup_model:
             self._setup_model()
@@ -251,6 +262,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """Build the networks, planner, buffers and inverse dynamics from the (possibly loaded) attributes."""
         self._setup_lr_schedule()
         self.set_random_seed(self.seed)
+        # A model saved before these were typed holds them as dicts.
+        self.subgoal_graph, self.explore = long_horizon_configs(self.subgoal_graph, self.explore)
         if self.goal_spec is None:
             if self.env is None:
                 raise ValueError(f"{type(self).__name__} needs an env to read the state/goal layout from.")
@@ -706,7 +719,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             self._online_loop = None  # SB3 resets the env: no plan in flight survives that
         if self.explore is not None:
             others = [] if callback is None else list(callback) if isinstance(callback, list) else [callback]
-            rebuild = FrontierRebuild(int(self.explore["every"]))
+            rebuild = FrontierRebuild(self.explore.every)
             callback = CallbackList([rebuild, *(c if isinstance(c, BaseCallback) else ConvertCallback(c) for c in others)])
         total, callback = self._setup_learn(
             int(total_timesteps), callback, reset_num_timesteps, tb_log_name or self.default_tb_log_name, progress_bar
@@ -731,12 +744,12 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """
         if len(self.pos_buffer) == 0:
             return None
-        settings = self.explore or EXPLORE_DEFAULTS
+        settings = self.explore or ExploreConfig()
         real = self.pos_buffer.contents()
-        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **(self.subgoal_graph or {}))
+        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **self._graph_kwargs())
         counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
         self.explorer = FrontierSubgoals(
-            graph, float(settings["goal_heuristic"]), float(settings["revisit_cost"]), plan_counts=counts
+            graph, float(settings.goal_heuristic), float(settings.revisit_cost), plan_counts=counts
         )
         if self.subgoal_graph is not None:
             self.subgoals = graph
@@ -751,8 +764,12 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         :param next_states: [M, D] their real next states.
         :return: the graph, also ``self.subgoals``.
         """
-        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **(self.subgoal_graph or {}))
+        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **self._graph_kwargs())
         return self.subgoals
+
+    def _graph_kwargs(self) -> dict[str, Any]:
+        """``subgoal_graph``'s settings as keywords of :meth:`GraphSubgoals.from_transitions` (none: its defaults)."""
+        return {} if self.subgoal_graph is None else self.subgoal_graph.kwargs()
 
     def _run_online(self, total_timesteps: int, callback: BaseCallback, log_interval: int) -> None:
         env = self.env

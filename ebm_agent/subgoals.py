@@ -25,6 +25,7 @@ Usage::
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from dataclasses import dataclass, field
 from typing import Any
@@ -35,6 +36,7 @@ from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 from stable_baselines3.common.callbacks import BaseCallback
 
+from ebm_agent.config import check_field_types, make_config
 from ebm_agent.costs import wrap_array
 from ebm_agent.energy import transition_energies
 from ebm_agent.moves import state_periods
@@ -42,12 +44,13 @@ from ebm_agent.moves import state_periods
 __all__ = [
     "AIMS",
     "EDGES",
-    "EXPLORE_DEFAULTS",
-    "SUBGOAL_GRAPH_KEYS",
     "UNSTICK",
+    "ExploreConfig",
     "FrontierSubgoals",
     "GraphSubgoals",
+    "SubgoalGraphConfig",
     "check_long_horizon",
+    "long_horizon_configs",
 ]
 
 AIMS: tuple[str, ...] = ("centre", "visited")
@@ -59,28 +62,84 @@ UNSTICK: tuple[str, ...] = ("next_node", "real_move")
 EDGES: tuple[str, ...] = ("energy", "real", "both")
 """Where a graph's edges come from (``edges=``): the learned energy, the real transitions, or either."""
 
-SUBGOAL_GRAPH_KEYS = frozenset(
-    {
-        "lookahead",
-        "quantile",
-        "cell",
-        "clearance",
-        "max_nodes",
-        "seed",
-        "patience",
-        "edges",
-        "unstick",
-        "real_hops",
-        "aim",
-        "stall_penalty",
-        "direct_when_nearer",
-    }
-)
-"""The keywords of an agent's ``subgoal_graph`` (:meth:`GraphSubgoals.from_transitions`)."""
 
-EXPLORE_DEFAULTS: dict[str, float] = {"every": 1000, "goal_heuristic": 1.0, "revisit_cost": 1.0}
-"""The keywords of an agent's ``explore`` and their defaults: transitions between rebuilds of the graph, and the
-weights of :class:`FrontierSubgoals`."""
+@dataclass
+class SubgoalGraphConfig:
+    """How an agent's subgoal graph is built and followed (the agent's ``subgoal_graph``; each field is the keyword of
+    :meth:`GraphSubgoals.from_transitions` of the same name, which documents it).
+
+    ``subgoal_graph=None`` (the agent's default, the paper's): no graph; ``{}`` or ``SubgoalGraphConfig()``: a graph
+    with these defaults.
+    """
+
+    lookahead: int | None = None
+    quantile: float = 0.95
+    cell: float = 0.75
+    clearance: float = 2.0
+    max_nodes: int = 5000
+    seed: int = 0
+    patience: int | None = None
+    edges: str = "energy"
+    unstick: str = "next_node"
+    real_hops: int = 1
+    aim: str = "centre"
+    stall_penalty: float | None = None
+    direct_when_nearer: bool = False
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+        check_edges(self.edges)
+        for name, choices in (("unstick", UNSTICK), ("aim", AIMS)):
+            if getattr(self, name) not in choices:
+                raise ValueError(f"subgoal_graph {name} must be one of {choices}, got {getattr(self, name)!r}.")
+
+    def kwargs(self) -> dict[str, Any]:
+        """The fields as keywords of :meth:`GraphSubgoals.from_transitions`."""
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class ExploreConfig:
+    """Frontier exploration while learning (the agent's ``explore``; :class:`FrontierSubgoals`).
+
+    :param every: transitions between rebuilds of the graph over the replay buffer.
+    :param goal_heuristic: weight of a frontier's distance to the goal (0: explore without regard to the goal).
+    :param revisit_cost: cost of a frontier per plan already made in its cell.
+    """
+
+    every: int = 1000
+    goal_heuristic: float = 1.0
+    revisit_cost: float = 1.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.every, bool) or not isinstance(self.every, int) or self.every < 1:
+            raise ValueError(f"explore every must be a positive int (transitions between rebuilds), got {self.every!r}.")
+        for name in ("goal_heuristic", "revisit_cost"):
+            weight = getattr(self, name)
+            if isinstance(weight, bool) or not isinstance(weight, int | float) or not (np.isfinite(weight) and weight >= 0):
+                raise ValueError(f"explore {name} must be a finite number >= 0 (a cost weight), got {weight!r}.")
+
+
+def long_horizon_configs(
+    subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None, explore: ExploreConfig | dict[str, Any] | None
+) -> tuple[SubgoalGraphConfig | None, ExploreConfig | None]:
+    """An agent's ``subgoal_graph`` and ``explore`` arguments as configs (None stays None: off).
+
+    :param subgoal_graph: a :class:`SubgoalGraphConfig`, a dict of its fields, or None.
+    :param explore: an :class:`ExploreConfig`, a dict of its fields, or None.
+    :return: the configs.
+    :raises ValueError: naming unknown keys (and the valid ones) or a bad value.
+    """
+
+    def build(cls: type, value: Any, owner: str) -> Any:
+        if value is None:
+            return None
+        try:
+            return make_config(cls, value, owner)
+        except TypeError as error:  # an unknown key or a value of another type: a bad setting, as for the fields
+            raise ValueError(str(error)) from None
+
+    return build(SubgoalGraphConfig, subgoal_graph, "subgoal_graph"), build(ExploreConfig, explore, "explore")
 
 
 @dataclass
@@ -736,34 +795,16 @@ def check_edges(edges: Any, agent: Any = None) -> None:
         )
 
 
-def check_long_horizon(subgoal_graph: Any, explore: Any, agent: Any = None) -> None:
-    """Refuse a ``subgoal_graph`` or ``explore`` agent argument that is not None or a dict of known keywords.
+def check_long_horizon(subgoal_graph: SubgoalGraphConfig | None, explore: ExploreConfig | None, agent: Any) -> None:
+    """Refuse a graph whose edges need an energy for an agent that has none (a graph or exploration on).
 
-    :param subgoal_graph: keywords of :meth:`GraphSubgoals.from_transitions`, or None.
-    :param explore: keywords of :data:`EXPLORE_DEFAULTS`, or None.
-    :param agent: the agent (checks that it has an energy where the graph's edges need one).
-    :raises ValueError: naming the unknown keywords or the bad value.
+    :param subgoal_graph: the agent's graph config, or None.
+    :param explore: the agent's exploration config, or None (exploring builds a graph with the default config).
+    :param agent: the agent.
+    :raises ValueError: naming the problem and the fix.
     """
-    if subgoal_graph is not None:
-        unknown = sorted(set(subgoal_graph) - SUBGOAL_GRAPH_KEYS) if isinstance(subgoal_graph, dict) else []
-        if not isinstance(subgoal_graph, dict) or unknown:
-            raise ValueError(
-                f"subgoal_graph must be None or a dict of GraphSubgoals.from_transitions keywords "
-                f"{sorted(SUBGOAL_GRAPH_KEYS)}; unknown: {unknown}."
-            )
     if subgoal_graph is not None or explore is not None:
-        check_edges((subgoal_graph or {}).get("edges", "energy"), agent)
-    if explore is not None:
-        unknown = sorted(set(explore) - set(EXPLORE_DEFAULTS)) if isinstance(explore, dict) else []
-        if not isinstance(explore, dict) or unknown:
-            raise ValueError(f"explore must be None or a dict of {sorted(EXPLORE_DEFAULTS)}; unknown: {unknown}.")
-        every = explore.get("every", EXPLORE_DEFAULTS["every"])
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise ValueError(f"explore['every'] must be a positive int (transitions between rebuilds), got {every!r}.")
-        for name in ("goal_heuristic", "revisit_cost"):
-            weight = explore.get(name, EXPLORE_DEFAULTS[name])
-            if isinstance(weight, bool) or not isinstance(weight, int | float) or not (np.isfinite(weight) and weight >= 0):
-                raise ValueError(f"explore[{name!r}] must be a finite number >= 0 (a cost weight), got {weight!r}.")
+        check_edges((subgoal_graph or SubgoalGraphConfig()).edges, agent)
 
 
 class FrontierRebuild(BaseCallback):

@@ -75,7 +75,7 @@ def apply_settings(model: Any, settings: dict[str, dict[str, Any]]) -> None:
     :param settings: from :func:`parse_settings`.
     :raises ValueError: for an agent without these settings (PPO, SAC), or a subgoal graph setting on an agent
         without ``subgoal_graph``.
-    :raises TypeError: for an unknown OnlineConfig field or a value of the wrong type.
+    :raises TypeError: for an unknown OnlineConfig or SubgoalGraphConfig field or a value of the wrong type.
     """
     if not hasattr(model, "online") or not hasattr(model, "subgoal_graph"):
         raise ValueError(f"{type(model).__name__} has no planning settings to change: only {', '.join(PLANNERS)}.")
@@ -88,7 +88,11 @@ def apply_settings(model: Any, settings: dict[str, dict[str, Any]]) -> None:
     if "subgoal_graph" in settings:
         if model.subgoal_graph is None:
             raise ValueError("subgoal_graph settings need a run made with subgoal_graph (this one plans to the goal).")
-        model.subgoal_graph = {**model.subgoal_graph, **settings["subgoal_graph"]}
+        valid = {f.name for f in dataclasses.fields(model.subgoal_graph)}
+        unknown = sorted(set(settings["subgoal_graph"]) - valid)
+        if unknown:
+            raise TypeError(f"subgoal_graph: unknown keys {unknown}; valid keys are {sorted(valid)}.")
+        model.subgoal_graph = dataclasses.replace(model.subgoal_graph, **settings["subgoal_graph"])
 
 
 def reevaluate(

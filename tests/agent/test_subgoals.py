@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from types import SimpleNamespace
 
 import gymnasium as gym
@@ -12,7 +13,7 @@ from stable_baselines3.common.callbacks import BaseCallback
 
 import envs  # noqa: F401  (registers the ids)
 from ebm_agent import EBMPlannerAgent
-from ebm_agent.subgoals import FrontierSubgoals, GraphSubgoals
+from ebm_agent.subgoals import ExploreConfig, FrontierSubgoals, GraphSubgoals, SubgoalGraphConfig
 
 
 class WallEnergy(torch.nn.Module):
@@ -117,7 +118,7 @@ def test_the_subgoal_graph_option_builds_the_graph_after_pretraining_and_rejects
     assert isinstance(agent.subgoals, GraphSubgoals) and agent.subgoals.lookahead == 4 and len(agent.subgoals.nodes) > 10
     with pytest.raises(ValueError, match="unknown"):
         EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph={"radius": 2})
-    with pytest.raises(ValueError, match="must be None or a dict"):
+    with pytest.raises(ValueError, match="must be a SubgoalGraphConfig, a dict of its fields, or None"):
         EBMPlannerAgent("MultiInputPolicy", env, subgoal_graph=10)
 
 
@@ -215,7 +216,7 @@ def test_the_explore_option_explores_during_learn_only():
     agent.learn(120, callback=Record())
     assert seen[0] == "NoneType" and seen[-1] == "FrontierSubgoals"  # built once the buffer holds transitions
     assert agent.explorer is None and agent.subgoals is None  # no subgoal_graph: after learn, plans aim at the goal
-    with pytest.raises(ValueError, match="explore must be None or a dict"):
+    with pytest.raises(ValueError, match=r"explore: unknown keys \['rebuild'\]"):
         EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"rebuild": 5})
     with pytest.raises(ValueError, match="positive int"):
         EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), explore={"every": 0})
@@ -505,3 +506,23 @@ def test_graph_subgoals_and_exploration_run_on_every_env(env_id):
         action, state = agent.predict(obs, state=state, deterministic=True)
         assert env.action_space.contains(action)
         obs, *_ = env.step(action)
+
+
+def test_the_long_horizon_settings_are_typed_configs(tmp_path):
+    graph = SubgoalGraphConfig(patience=2, aim="visited")
+    agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), subgoal_graph=graph, explore={"every": 50})
+    assert agent.subgoal_graph == graph and agent.explore == ExploreConfig(every=50)
+    # the config's defaults are the builder's: a graph from {} is the graph from no keywords at all
+    builder = inspect.signature(GraphSubgoals.from_transitions).parameters
+    assert {name: builder[name].default for name in SubgoalGraphConfig().kwargs()} == SubgoalGraphConfig().kwargs()
+    with pytest.raises(ValueError, match=r"aim must be one of \('centre', 'visited'\)"):
+        SubgoalGraphConfig(aim="middle")
+    with pytest.raises(ValueError, match="edges must be one of"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), subgoal_graph={"edges": "walls"})
+    with pytest.raises(ValueError, match=r"SubgoalGraphConfig\.patience must be"):
+        EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), subgoal_graph={"patience": "2"})
+    # a model saved before the settings were typed holds dicts: load() turns them into the configs
+    agent.subgoal_graph, agent.explore = {"patience": 2, "aim": "visited"}, {"every": 50, "goal_heuristic": 1.0}
+    agent.save(tmp_path / "old.zip")
+    loaded = EBMPlannerAgent.load(tmp_path / "old.zip", env=gym.make("ebm/Maze-v0"), device="cpu")
+    assert loaded.subgoal_graph == graph and loaded.explore == ExploreConfig(every=50)

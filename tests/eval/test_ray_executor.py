@@ -66,7 +66,9 @@ def crash_once_runner(job: Job) -> JobResult:
 @pytest.fixture(scope="module")
 def ray_local():
     ray = pytest.importorskip("ray", reason=NO_RAY)
-    ray.init(num_cpus=2, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
+    # address="local": a new instance of this test's own, never one that another test process (pytest -n 2) started
+    # on this machine, which ray.init() would otherwise join (and refuse num_cpus for).
+    ray.init(address="local", num_cpus=2, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
     ray.cloudpickle.register_pickle_by_value(sys.modules[__name__])
     yield ray
     ray.cloudpickle.unregister_pickle_by_value(sys.modules[__name__])
