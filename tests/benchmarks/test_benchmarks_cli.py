@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
-from benchmarks import eval_goal_weight
+from benchmarks import eval_goal_weight, settings
 from benchmarks.cli import main
 
 
@@ -28,3 +28,18 @@ def test_eval_goal_weight_benchmark_prints_one_row_per_seed(capsys: pytest.Captu
     assert eval_goal_weight.main(["--timesteps", "0", "--seeds", "0", "--episodes", "1", "--weights", "1", "10"]) == 0
     rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| 0 |")]
     assert len(rows) == 1 and rows[0].count("success") == 2
+
+
+def test_the_settings_count_counts_config_fields_not_config_arguments(capsys: pytest.CaptureFixture[str]) -> None:
+    import dataclasses
+
+    from ebm_agent import EBMPlannerAgent
+    from ebm_agent.config import OnlineConfig
+
+    groups, alternatives = settings.leaf_settings(EBMPlannerAgent)
+    counts = dict(groups)
+    assert counts["online: OnlineConfig"] == len(dataclasses.fields(OnlineConfig))
+    assert "planner_config: MPPIConfig" in counts and dict(alternatives).keys() == {"planner_config: LangevinConfig"}
+    assert settings.main([]) == 0
+    out = capsys.readouterr().out
+    assert f"| **EBMPlannerAgent** | **total** | **{sum(counts.values())}** |" in out and "| **SAC** | **total** |" in out
