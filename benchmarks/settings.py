@@ -50,7 +50,9 @@ def leaf_settings(agent_class: type) -> tuple[list[tuple[str, int]], list[tuple[
         parameters) or ``"<parameter>: <Config>"``; alternatives are the configs a parameter may take instead of its
         default one, not counted in the total.
     """
-    plain, groups, alternatives = 0, [], []
+    plain = 0
+    groups: list[tuple[str, int]] = []
+    alternatives: list[tuple[str, int]] = []
     for name, parameter in inspect.signature(agent_class).parameters.items():
         if parameter.default is inspect.Parameter.empty or name in INFRASTRUCTURE:
             continue

@@ -28,7 +28,7 @@ from ebm_agent.datasets import TransitionDataset
 from ebm_agent.energy import EnergyConfig, EnergyModel
 from ebm_agent.inverse_dynamics import InverseDynamics
 from ebm_agent.langevin import LangevinConfig, LangevinPlanner
-from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss, info_nce_loss, reach_candidates
+from ebm_agent.losses import ContrastBatch, EnergyLoss, make_loss, reach_candidates
 from ebm_agent.mppi import MPPIConfig, MPPIPlanner
 from ebm_agent.planner import Planner
 from ebm_agent.policy import PlanningPolicy
@@ -246,6 +246,14 @@ class EBMPlannerAgent(PlannerAgentBase):
     def _build_model(self) -> None:
         spec = self.goal_spec
         assert spec is not None
+        # The training objective, built once from the settings (online's hard-negative ones as at construction).
+        self.loss_fn: EnergyLoss = make_loss(
+            self.loss,
+            self.perturbed_negatives,
+            self.online.hard_negative_loss,
+            self.online.hard_negative_weight,
+            self.online.hard_negative_margin,
+        )
         periodic = spec.goal_indices.tolist() if spec.goal_period is not None else []
         energy = EnergyModel(
             spec.state_dim,
@@ -304,6 +312,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             "hard_negative_buffer",
             "plan_cost",
             "extra_energies",
+            "loss_fn",
             "_negative_radius",
         ]
 
@@ -496,47 +505,21 @@ class EBMPlannerAgent(PlannerAgentBase):
         self.policy.set_training_mode(True)
         as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
         states = as_tensor(pos_states)  # [P, D]
-        energy_pos = energy(states, as_tensor(pos_next))  # [P]
-        if self.loss in ("infonce_reach", "infonce_perturb"):
-            if self.loss == "infonce_reach":
-                radius = torch.as_tensor(self.real_moves.largest, device=self.device).clamp_min(1e-6)  # [D]
-                candidates = reach_candidates(states, radius, self.reach_candidates, self._generator)  # [P, K, D]
-            else:
-                candidates = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, K, D]
-            energy_neg = energy(states[:, None, :].expand_as(candidates), candidates)  # [P, K]
-            loss, stats = info_nce_loss(energy_pos, energy_neg)
-            # InfoNCE fixes E(s, .) only up to a constant per s; pinning the real transitions' energy to 0 makes
-            # energies comparable across states (without it the per-state offset swamps the walls: AUROC ~0.53).
-            anchor = energy_pos.square().mean()
-            loss = loss + l2 * anchor
-            stats.update(loss_anchor=float(anchor.detach()), loss=float(loss.detach()))
-        else:
-            energy_neg = energy(as_tensor(neg_states), as_tensor(neg_next))  # [M]
-            if self.loss == "cd" and self.perturbed_negatives > 0:
-                perturbed = as_tensor(self._perturbed_next_states(pos_states, pos_next))  # [P, M', D]
-                energy_perturbed = energy(states[:, None, :].expand_as(perturbed), perturbed)  # [P, M']
-                loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=l2)
-                # The perturbed negatives as a second CD term on the same positives, so that planned and perturbed
-                # negatives weigh equally whatever their numbers: L = E+ - (E-_plan + E-_pert) / 2 + l2 (...).
-                mean_perturbed = energy_perturbed.mean()
-                loss = 0.5 * loss + 0.5 * (
-                    energy_pos.mean() - mean_perturbed + l2 * (energy_pos.square().mean() + energy_perturbed.square().mean())
-                )
-                stats.update(energy_perturbed=float(mean_perturbed.detach()), loss=float(loss.detach()))
-            elif self.loss == "cd":
-                if hard is not None and self.online.hard_negative_loss == "negatives":
-                    loss, stats = self._cd_with_hard_negatives(energy_pos, energy_neg, hard, l2)
-                else:
-                    loss, stats = contrastive_divergence_loss(energy_pos, energy_neg, l2_coeff=l2)
-                if hard is not None and self.online.hard_negative_loss == "margin":
-                    hard_states = as_tensor(hard.states)  # [H, D]
-                    energy_failed = energy(hard_states, as_tensor(hard.next_states))  # [H]
-                    energy_real = energy(hard_states, as_tensor(hard.actions))  # [H]
-                    term, hard_stats = hard_negative_margin_loss(energy_failed, energy_real, self.online.hard_negative_margin)
-                    loss = loss + self.online.hard_negative_weight * term
-                    stats.update(hard_stats, loss=float(loss.detach()))
-            else:
-                loss, stats = info_nce_loss(energy_pos, energy_neg)
+        candidates = None  # [P, K, D] the loss's contrast set of each real state, where it has one
+        if self.loss_fn.contrast == "reach":
+            radius = torch.as_tensor(self.real_moves.largest, device=self.device).clamp_min(1e-6)  # [D]
+            candidates = reach_candidates(states, radius, self.reach_candidates, self._generator)
+        elif self.loss_fn.contrast == "perturbed":
+            candidates = as_tensor(self._perturbed_next_states(pos_states, pos_next))
+        batch = ContrastBatch(
+            states,
+            as_tensor(pos_next),
+            as_tensor(neg_states),
+            as_tensor(neg_next),
+            candidates,
+            None if hard is None else (as_tensor(hard.states), as_tensor(hard.next_states), as_tensor(hard.actions)),
+        )
+        loss, stats = self.loss_fn(energy, batch, l2)
         optimizer = self.policy.optimizer
         assert optimizer is not None
         optimizer.zero_grad()
@@ -552,42 +535,6 @@ class EBMPlannerAgent(PlannerAgentBase):
         optimizer.step()
         stats["energy_gap"] = stats["energy_neg"] - stats["energy_pos"]
         return stats
-
-    def _cd_with_hard_negatives(
-        self, energy_pos: torch.Tensor, energy_neg: torch.Tensor, hard: TransitionBatch, l2_coeff: float
-    ) -> tuple[torch.Tensor, dict[str, float]]:
-        """The CD loss with the failed steps among its negatives (``hard_negative_loss="negatives"``).
-
-        E(x-) becomes the weighted mean over the planned negatives (weight 1 each) and the failed steps (weight
-        ``hard_negative_weight`` each), in both the contrastive and the L2 term.
-
-        :param energy_pos: [P] energies of the real transitions.
-        :param energy_neg: [M] energies of the planned transitions.
-        :param hard: the failed steps (states [H, D], next_states s'_plan [H, D]).
-        :param l2_coeff: weight of the L2 term.
-        :return: the scalar loss and its statistics (``energy_failed`` added).
-        """
-        as_tensor = lambda array: torch.as_tensor(array, device=self.device)  # noqa: E731
-        energy_failed = self.energy_model(as_tensor(hard.states), as_tensor(hard.next_states))  # [H]
-        weights = torch.cat(
-            [torch.ones_like(energy_neg), torch.full_like(energy_failed, self.online.hard_negative_weight)]
-        )  # [M + H]
-        weights = weights / weights.sum()
-        negatives = torch.cat([energy_neg, energy_failed])  # [M + H]
-        mean_pos, mean_neg = energy_pos.mean(), (weights * negatives).sum()
-        loss_ml = mean_pos - mean_neg
-        loss_l2 = energy_pos.square().mean() + (weights * negatives.square()).sum()
-        loss = loss_ml + l2_coeff * loss_l2
-        stats = {
-            "energy_pos": float(mean_pos.detach()),
-            "energy_neg": float(mean_neg.detach()),
-            "energy_failed": float(energy_failed.detach().mean()),
-            "num_failed": float(len(energy_failed)),
-            "loss": float(loss.detach()),
-            "loss_ml": float(loss_ml.detach()),
-            "loss_l2": float(loss_l2.detach()),
-        }
-        return loss, stats
 
     def _perturbed_next_states(self, states: np.ndarray, next_states: np.ndarray) -> np.ndarray:
         """``perturbed_negatives`` near misses of each real next state: s' + N(0, (c std(s' - s))^2), c from

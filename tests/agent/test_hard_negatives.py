@@ -13,7 +13,7 @@ from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
 from ebm_agent.base import Segment
 from ebm_agent.config import OnlineConfig
-from ebm_agent.losses import contrastive_divergence_loss, hard_negative_margin_loss
+from ebm_agent.losses import ContrastBatch, contrastive_divergence_loss, hard_negative_margin_loss
 
 SMALL = {
     "planner_config": {"num_samples": 16, "iterations": 2},
@@ -157,7 +157,16 @@ def test_negatives_mode_at_weight_one_is_cd_over_the_joined_negatives() -> None:
         energy(torch.as_tensor(states), torch.as_tensor(next_states)),
         energy(torch.as_tensor(next_states), torch.as_tensor(states)),
     )  # [5], [5]
-    loss, stats = agent._cd_with_hard_negatives(energy_pos, energy_neg, hard, agent.l2_coeff)
+    assert agent.loss_fn.hard_negative_loss == "negatives"  # built from the online settings
+    as_tensor = torch.as_tensor
+    batch = ContrastBatch(
+        as_tensor(states),
+        as_tensor(next_states),
+        as_tensor(next_states),
+        as_tensor(states),
+        hard=(as_tensor(hard.states), as_tensor(hard.next_states), as_tensor(hard.actions)),
+    )
+    loss, stats = agent.loss_fn(energy, batch, agent.l2_coeff)
     joined = torch.cat([energy_neg, energy(torch.as_tensor(hard.states), torch.as_tensor(hard.next_states))])  # [10]
     expected, _ = contrastive_divergence_loss(energy_pos, joined, l2_coeff=0.5)
     assert torch.isclose(loss, expected, atol=1e-6) and stats["num_failed"] == 5.0

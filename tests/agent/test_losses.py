@@ -192,3 +192,37 @@ def test_clipped_adam_fires_step_hooks_once() -> None:
     optimizer.step()
     assert calls == ["pre", "post"]
     assert torch.all(param < 0)
+
+
+def test_the_agent_builds_its_loss_once_from_its_settings() -> None:
+    import gymnasium as gym
+
+    import envs  # noqa: F401
+    from ebm_agent import EBMPlannerAgent
+    from ebm_agent.losses import BatchInfoNCE, ConditionalInfoNCE, ContrastiveDivergence, make_loss
+
+    cases = {
+        ("cd", 0): (ContrastiveDivergence, None),
+        ("cd", 4): (ContrastiveDivergence, "perturbed"),
+        ("infonce", 0): (BatchInfoNCE, None),
+        ("infonce_reach", 0): (ConditionalInfoNCE, "reach"),
+        ("infonce_perturb", 4): (ConditionalInfoNCE, "perturbed"),
+    }
+    for (name, perturbed), (cls, contrast) in cases.items():
+        loss = make_loss(name, perturbed)
+        assert isinstance(loss, cls) and loss.contrast == contrast, name
+    with pytest.raises(ValueError, match="loss must be one of"):
+        make_loss("hinge")
+    agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), loss="infonce_reach", device="cpu")
+    assert isinstance(agent.loss_fn, ConditionalInfoNCE) and agent.loss_fn.contrast == "reach"
+
+
+def test_the_conditional_infonce_needs_its_contrast_set() -> None:
+    from ebm_agent.losses import ConditionalInfoNCE, ContrastBatch
+
+    states = torch.zeros(3, 2)
+    batch = ContrastBatch(states, states + 0.1, states, states)
+    with pytest.raises(ValueError, match=r"needs batch\.candidates"):
+        ConditionalInfoNCE("reach")(lambda s, t: (t - s).abs().sum(-1), batch, 1.0)
+    with pytest.raises(ValueError, match="contrast must be"):
+        ConditionalInfoNCE("box")
