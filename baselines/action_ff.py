@@ -206,6 +206,8 @@ class ActionFFAgent(PlannerAgentBase):
     :param subgoal_graph: graph subgoals (:class:`~ebm_agent.base.PlannerAgentBase`); Action FF has no energy, so
         its graph's edges must be the moves it made (``{"edges": "real"}``). None (the default): plans aim at the goal.
     :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`); None: none.
+    :param subgoal_class: the subgoal provider built with ``subgoal_graph``'s keywords
+        (:class:`~ebm_agent.base.PlannerAgentBase`; it gets no energy); None: :class:`~ebm_agent.subgoals.GraphSubgoals`.
     :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
         inferred from a reset observation and printed with ``verbose >= 1``; ``goal_spec.goal_indices`` holds them).
     :param stats_window_size: episodes averaged for ``rollout/*``.
@@ -232,6 +234,7 @@ class ActionFFAgent(PlannerAgentBase):
         standardize_outputs: bool | None = True,
         subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
         explore: ExploreConfig | dict[str, Any] | None = None,
+        subgoal_class: type | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -257,6 +260,7 @@ class ActionFFAgent(PlannerAgentBase):
             inverse_dynamics=inverse_dynamics,
             subgoal_graph=subgoal_graph,
             explore=explore,
+            subgoal_class=subgoal_class,
             goal_indices=goal_indices,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,

@@ -134,6 +134,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         may come from this agent's energy (the default). None (the default, the paper's): plans aim at the goal.
     :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`). None (the
         default, the paper's): none.
+    :param subgoal_class: the subgoal provider built with ``subgoal_graph``'s keywords and this agent's energy
+        (:class:`~ebm_agent.base.PlannerAgentBase`); None: :class:`~ebm_agent.subgoals.GraphSubgoals`.
     :param image_log_interval: gradient steps between TensorBoard images of the plan and the energy map (2-D
         states only); 0 disables them.
     :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
@@ -169,6 +171,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         image_log_interval: int = 1000,
         subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
         explore: ExploreConfig | dict[str, Any] | None = None,
+        subgoal_class: type | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -219,6 +222,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             inverse_dynamics=inverse_dynamics,
             subgoal_graph=subgoal_graph,
             explore=explore,
+            subgoal_class=subgoal_class,
             goal_indices=goal_indices,
             stats_window_size=stats_window_size,
             tensorboard_log=tensorboard_log,
@@ -237,8 +241,6 @@ class EBMPlannerAgent(PlannerAgentBase):
                 "online.hard_negatives and perturbed_negatives are two different CD losses and cannot be combined; "
                 "set one of them."
             )
-        self.plan_iterations = int(getattr(self.planner_config, "iterations", 0) or 0)
-        self._energy_gaps: list[float] = []
         if _init_setup_model:
             self._setup_model()
 
@@ -305,6 +307,12 @@ class EBMPlannerAgent(PlannerAgentBase):
         assert isinstance(model, EnergyModel)
         return model
 
+    has_energy = True
+
+    def _subgoal_energy(self) -> EnergyModel:
+        """The learned energy, handed to the subgoal builder (its graph's edges)."""
+        return self.energy_model
+
     def _excluded_save_params(self) -> list[str]:
         return [
             *super()._excluded_save_params(),
@@ -357,12 +365,9 @@ class EBMPlannerAgent(PlannerAgentBase):
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
         init = None if init_plans is None else torch.as_tensor(init_plans, device=self.device)  # [n, T+1, D]
         self.policy.set_training_mode(False)
-        # The configured budget is the planner's own (a full search, or its warm-start budget for a warm start); only
-        # iterations grown by the adaptive rule are passed explicitly.
-        configured = int(getattr(self.planner_config, "iterations", 0) or 0)
-        iterations = self.plan_iterations if self.plan_iterations != configured else None
-        if iterations is None and training and init is None:
-            iterations = learn_budgets(self.planner_config)[0]
+        # The configured budget is the planner's own (a full search, or its warm-start budget for a warm start); a
+        # fresh plan made while learning may have a budget of its own (train_iterations).
+        iterations = learn_budgets(self.planner_config)[0] if training and init is None else None
         result = self.planner.plan(start, goal, cost, init_plan=init, generator=generator, iterations=iterations)
         plans = result.plans  # [n, T+1, D]
         with torch.no_grad():
@@ -413,8 +418,6 @@ class EBMPlannerAgent(PlannerAgentBase):
                     for k, v in self.inverse_model.update(positives.states, positives.next_states, positives.actions).items()
                 }
             )
-        if "energy_neg" in stats:
-            self._adapt_iterations(stats["energy_neg"] - stats["energy_pos"])
         if self.image_log_interval and self._n_updates % self.image_log_interval == 0:
             self._log_images(segments[0])
         return stats
@@ -552,18 +555,6 @@ class EBMPlannerAgent(PlannerAgentBase):
         noise = torch.randn(shape, generator=self._generator, device=self.device) * scales[pick][..., None]  # [P, M, D]
         noise = noise * torch.as_tensor(std, dtype=torch.float32, device=self.device)
         return (torch.as_tensor(next_states, dtype=torch.float32, device=self.device)[:, None, :] + noise).cpu().numpy()
-
-    def _adapt_iterations(self, gap: float) -> None:
-        """The original's adaptive planning budget: more iterations while negatives stay far above positives."""
-        cfg = self.online
-        if not cfg.adaptive_iterations or not self.plan_iterations:
-            return
-        self._energy_gaps.append(gap)
-        if len(self._energy_gaps) >= cfg.adapt_every:
-            if float(np.mean(self._energy_gaps)) > cfg.adapt_gap:
-                self.plan_iterations = min(self.plan_iterations + cfg.adapt_increment, cfg.max_iterations)
-            self._energy_gaps = []
-        self.logger.record("plan/iterations", self.plan_iterations)
 
     def learn_offline(  # type: ignore[override]
         self: SelfEBMPlannerAgent,

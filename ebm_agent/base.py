@@ -40,6 +40,7 @@ from ebm_agent.subgoals import (
     SubgoalGraphConfig,
     check_long_horizon,
     long_horizon_configs,
+    subgoal_settings,
 )
 
 SelfPlannerAgent = TypeVar("SelfPlannerAgent", bound="PlannerAgentBase")
@@ -176,6 +177,14 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         graph to the goal once it has been seen, else at the cheapest frontier of the visited states. The graph uses
         ``subgoal_graph``'s settings. After ``learn``, plans aim as ``subgoal_graph`` says (subgoals along the final
         graph, or the goal when it is None). None (the default, the paper's): no frontier exploration.
+    :param subgoal_class: the subgoal provider the agent builds, as SB3's off-policy algorithms take a
+        ``replay_buffer_class`` with its ``replay_buffer_kwargs`` (here ``subgoal_graph``): None (the default) is
+        :class:`~ebm_agent.subgoals.GraphSubgoals`. Any class with a classmethod ``from_transitions(states [M, D],
+        next_states [M, D], *, goal_indices, lookahead, energy, period, **subgoal_graph)`` whose result has
+        ``subgoals(states [N, D], goals [N, G]) -> [N, G]`` can stand in; the agent hands it the real transitions,
+        its goal dims, its horizon, its learned energy (None for Action FF) and the periods of its state dims, never
+        itself. Given without ``subgoal_graph``, it is built with no keywords. ``explore`` needs a
+        :class:`~ebm_agent.subgoals.GraphSubgoals` (or a subclass).
     :param goal_indices: the observation dims that ``achieved_goal`` copies (None: the env's ``goal_indices``, else
         inferred from a reset observation and printed with ``verbose >= 1``; ``goal_spec.goal_indices`` holds them).
     :param stats_window_size: episodes averaged for ``rollout/*`` logs.
@@ -200,6 +209,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         inverse_dynamics: str | InverseDynamics | None = None,
         subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None = None,
         explore: ExploreConfig | dict[str, Any] | None = None,
+        subgoal_class: type | None = None,
         goal_indices: Sequence[int] | None = None,
         stats_window_size: int = 100,
         tensorboard_log: str | None = None,
@@ -208,8 +218,9 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         device: torch.device | str = "auto",
         _init_setup_model: bool = True,
     ) -> None:
-        graph_config, explore_config = long_horizon_configs(subgoal_graph, explore)
-        check_long_horizon(graph_config, explore_config, self)
+        graph_config = subgoal_settings(subgoal_class, subgoal_graph)
+        explore_config = long_horizon_configs(None, explore)[1]
+        check_long_horizon(graph_config, explore_config, subgoal_class, self.has_energy, type(self).__name__)
         if isinstance(policy, str) and policy not in self.policy_aliases:
             raise ValueError(
                 f"{type(self).__name__} takes policy 'MultiInputPolicy' (its networks plan over the Dict observation "
@@ -251,6 +262,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self._warned_no_step = False
         self.subgoals: Any = None  # e.g. ebm_agent.subgoals.GraphSubgoals: aims each plan at subgoals(states, goals)
         self.explorer: Any = None  # e.g. ebm_agent.subgoals.FrontierSubgoals: aims the plans made while learning
+        self.subgoal_class = subgoal_class
         self.subgoal_graph = graph_config
         self.explore = explore_config
         self.goal_indices = None if goal_indices is None else [int(index) for index in goal_indices]
@@ -262,8 +274,10 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """Build the networks, planner, buffers and inverse dynamics from the (possibly loaded) attributes."""
         self._setup_lr_schedule()
         self.set_random_seed(self.seed)
-        # A model saved before these were typed holds them as dicts.
-        self.subgoal_graph, self.explore = long_horizon_configs(self.subgoal_graph, self.explore)
+        # A model saved before these were typed holds them as dicts (and no subgoal_class).
+        self.subgoal_class = getattr(self, "subgoal_class", None)
+        self.subgoal_graph = subgoal_settings(self.subgoal_class, self.subgoal_graph)
+        self.explore = long_horizon_configs(None, self.explore)[1]
         if self.goal_spec is None:
             if self.env is None:
                 raise ValueError(f"{type(self).__name__} needs an env to read the state/goal layout from.")
@@ -746,7 +760,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             return None
         settings = self.explore or ExploreConfig()
         real = self.pos_buffer.contents()
-        graph = GraphSubgoals.from_transitions(self, real.states, real.next_states, **self._graph_kwargs())
+        graph = self._make_subgoals(real.states, real.next_states)
+        assert isinstance(graph, GraphSubgoals)  # explore needs a graph (checked at construction)
         counts = self.explorer.plan_counts if isinstance(self.explorer, FrontierSubgoals) else {}
         self.explorer = FrontierSubgoals(
             graph, float(settings.goal_heuristic), float(settings.revisit_cost), plan_counts=counts
@@ -757,19 +772,43 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.logger.record("explore/graph_nodes", len(graph.nodes))
         return self.explorer
 
-    def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> GraphSubgoals:
-        """Build the subgoal graph (``subgoal_graph``'s settings, or the defaults) over real transitions and use it.
+    def build_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> Any:
+        """Build the subgoals (``subgoal_class`` with ``subgoal_graph``'s settings, or the defaults) over real
+        transitions and use them.
 
         :param states: [M, D] real states.
         :param next_states: [M, D] their real next states.
-        :return: the graph, also ``self.subgoals``.
+        :return: the subgoal provider (a :class:`~ebm_agent.subgoals.GraphSubgoals` by default), also
+            ``self.subgoals``.
         """
-        self.subgoals = GraphSubgoals.from_transitions(self, states, next_states, **self._graph_kwargs())
+        self.subgoals = self._make_subgoals(states, next_states)
         return self.subgoals
 
-    def _graph_kwargs(self) -> dict[str, Any]:
-        """``subgoal_graph``'s settings as keywords of :meth:`GraphSubgoals.from_transitions` (none: its defaults)."""
-        return {} if self.subgoal_graph is None else self.subgoal_graph.kwargs()
+    has_energy: bool = False
+    """Whether the agent has a learned energy over transitions (``energy_model``) that subgoal graphs may read."""
+
+    def _subgoal_energy(self) -> Any:
+        """The learned energy E(s [..., D], s' [..., D]) -> [...] handed to the subgoal builder (None: none)."""
+        return None
+
+    def _make_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> Any:
+        """``subgoal_class.from_transitions`` over real transitions, from what the agent learned: its goal dims,
+        horizon (the default lookahead), energy and state periods, never the agent itself."""
+        assert self.goal_spec is not None
+        settings = self.subgoal_graph
+        kwargs = {} if settings is None else settings.kwargs() if isinstance(settings, SubgoalGraphConfig) else dict(settings)
+        if kwargs.get("lookahead") is None:
+            kwargs["lookahead"] = self.horizon
+        builder: Any = GraphSubgoals if self.subgoal_class is None else self.subgoal_class
+        states = np.asarray(states, dtype=np.float32)  # [M, D]
+        return builder.from_transitions(
+            states,
+            np.asarray(next_states, dtype=np.float32),
+            goal_indices=list(self.goal_spec.goal_indices),
+            energy=self._subgoal_energy(),
+            period=state_periods(self.goal_spec, states.shape[1]),
+            **kwargs,
+        )
 
     def _run_online(self, total_timesteps: int, callback: BaseCallback, log_interval: int) -> None:
         env = self.env

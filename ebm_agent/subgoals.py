@@ -10,7 +10,9 @@ centres is possible (E(u, v) at most a quantile of the energies of real transiti
 the goal with the node ``lookahead`` edges along the shortest path from the state to the goal (the goal itself once
 the path is shorter). Where no path exists the goal is kept, so the agent plans as before.
 
-It uses only what the agent learned and saw (states, real step sizes, its energy): no wall map, no env internals.
+It uses only what the agent learned and saw (states, real step sizes, its energy): no wall map, no env internals;
+the builder is handed those (real transitions, goal dims, a lookahead, an energy function, state periods), never the
+agent, so any energy over transitions can stand in (an agent takes another provider as ``subgoal_class``).
 The edges come from the energy (``edges="energy"``, the EBM agent's ``energy_model``), from the moves the agent made
 (``edges="real"``: a real transition between two neighbouring cells is a move that can be made; any agent, Action FF
 included, which has no energy) or from both. Any agent whose ``subgoals`` attribute the planning loop reads
@@ -19,14 +21,19 @@ included, which has no energy) or from both. Any agent whose ``subgoals`` attrib
 Usage::
 
     agent.learn_offline(dataset, epochs=10)
-    agent.subgoals = GraphSubgoals.from_transitions(agent, dataset.states, dataset.next_states)
-    # predict() now plans towards subgoals; agent.subgoals = None restores the plain goal
+    agent.subgoals = GraphSubgoals.from_transitions(
+        dataset.states, dataset.next_states, goal_indices=agent.goal_spec.goal_indices, lookahead=agent.horizon,
+        energy=agent.energy_model,
+    )
+    # predict() now plans towards subgoals; agent.subgoals = None restores the plain goal.
+    # agent.build_subgoals(states, next_states) does the same with the agent's subgoal_graph settings.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -37,9 +44,8 @@ from scipy.spatial import cKDTree
 from stable_baselines3.common.callbacks import BaseCallback
 
 from ebm_agent.config import check_field_types, make_config
-from ebm_agent.costs import wrap_array
+from ebm_agent.costs import TransitionEnergy, wrap_array
 from ebm_agent.energy import transition_energies
-from ebm_agent.moves import state_periods
 
 __all__ = [
     "AIMS",
@@ -51,6 +57,7 @@ __all__ = [
     "SubgoalGraphConfig",
     "check_long_horizon",
     "long_horizon_configs",
+    "subgoal_settings",
 ]
 
 AIMS: tuple[str, ...] = ("centre", "visited")
@@ -229,10 +236,13 @@ class GraphSubgoals:
     @classmethod
     def from_transitions(
         cls,
-        agent: Any,
         states: np.ndarray,
         next_states: np.ndarray,
-        lookahead: int | None = None,
+        *,
+        goal_indices: Sequence[int],
+        lookahead: int,
+        energy: TransitionEnergy | None = None,
+        period: np.ndarray | None = None,
         quantile: float = 0.95,
         cell: float = 0.75,
         clearance: float = 2.0,
@@ -248,11 +258,15 @@ class GraphSubgoals:
     ) -> GraphSubgoals:
         """Build the graph from real transitions (a dataset, or an online agent's replay buffer).
 
-        :param agent: an agent with ``goal_spec`` and ``horizon``, and for edges from the energy ``energy_model``
-            (E(s [..., D], s' [..., D]) -> [...]) and ``device``.
         :param states: [M, D] real states.
         :param next_states: [M, D] their real next states.
-        :param lookahead: edges to the subgoal (default: the agent's horizon).
+        :param goal_indices: [G] the state dims the goal constrains (a goal spec's ``goal_indices``).
+        :param lookahead: edges to the subgoal (an agent passes its planning horizon).
+        :param energy: the learned energy E(s [..., D], s' [..., D]) -> [...] (a torch module or callable, e.g. an
+            EBM agent's ``energy_model``), read whenever the graph asks whether a move is possible; needed for
+            ``edges="energy"`` or ``"both"``, None for a graph of the real moves only.
+        :param period: [D] the period of each state dim (0: not periodic), or None where none is
+            (:func:`~ebm_agent.moves.state_periods` of a goal spec).
         :param quantile: a move is allowed when its energy is at most this quantile of the real transitions'.
         :param cell: the grid's cell side in units of the largest real step of each dim (below 1, so that a move
             between neighbouring cells' centres is one a single step can make).
@@ -280,24 +294,20 @@ class GraphSubgoals:
             the class).
         :return: the graph.
         :raises ValueError: for empty or mismatched transitions, a quantile outside (0, 1], an unknown ``edges``, or
-            edges from the energy for an agent without one.
+            edges from the energy without an ``energy``.
         """
         states, next_states = np.asarray(states, np.float32), np.asarray(next_states, np.float32)  # [M, D] each
         if states.ndim != 2 or states.shape != next_states.shape or len(states) == 0:
             raise ValueError(
                 f"states and next_states must be non-empty [M, D] arrays, got {states.shape} and {next_states.shape}."
             )
-        if not 0.0 < quantile <= 1.0:
-            raise ValueError(f"quantile must be in (0, 1], got {quantile!r}.")
-        if not 0.0 < cell <= 1.0:
-            raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
-        check_edges(edges, agent)
-        if aim not in AIMS:
-            raise ValueError(f"aim must be one of {AIMS}, got {aim!r}.")
-        if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
-            raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
+        _check_graph_settings(quantile, cell, edges, energy, aim, real_hops)
         rng = np.random.default_rng(seed)
-        period = state_periods(agent.goal_spec, states.shape[1])  # [D] or None
+        if period is not None:
+            period = np.asarray(period, dtype=np.float32)  # [D]
+            if period.shape != (states.shape[1],):
+                raise ValueError(f"period must be a [D] = [{states.shape[1]}] array of periods, got shape {period.shape}.")
+            period = period if np.any(period > 0) else None
         step = np.maximum(np.abs(wrap_array(next_states - states, period)).max(axis=0), 1e-6)  # [D]
         side, around = _grid(step, cell, period)  # [D] each
         cells = _cells(states, side, around)  # [M, D]
@@ -317,13 +327,13 @@ class GraphSubgoals:
         boxsize = around if period is not None else None  # periodic dims: their cells wrap round
         pairs = cKDTree(occupied, boxsize=boxsize).query_pairs(1.0, p=np.inf, output_type="ndarray")  # [P, 2]
         pairs = np.concatenate([pairs, pairs[:, ::-1]])  # both directions: feasibility is directional
-        energy, threshold = None, float("inf")
+        energy_of, threshold = None, float("inf")
         allowed = np.zeros((0, 2), dtype=np.int64)  # [E, 2]
         if edges in ("energy", "both"):
-            energy = functools.partial(transition_energies, agent)
+            energy_of = functools.partial(transition_energies, energy)
             sample = rng.choice(len(states), min(len(states), 20_000), replace=False)
-            threshold = float(np.quantile(energy(states[sample], next_states[sample]), quantile))
-            allowed = pairs[energy(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]
+            threshold = float(np.quantile(energy_of(states[sample], next_states[sample]), quantile))
+            allowed = pairs[energy_of(nodes[pairs[:, 0]], nodes[pairs[:, 1]]) <= threshold]
         if edges in ("real", "both"):
             real = _real_moves(occupied, states, next_states, side, real_hops, around)
             allowed = np.unique(np.concatenate([allowed, real]), axis=0)
@@ -333,8 +343,8 @@ class GraphSubgoals:
         span = _cell_gaps(occupied[allowed[:, 0]] - occupied[allowed[:, 1]], around).max(axis=1, initial=1)  # [E]
         cost = span + clearance * (1.0 - degree[allowed[:, 1]] / max(int(degree.max(initial=0)), 1))  # [E]
         graph = csr_matrix((cost, (allowed[:, 0], allowed[:, 1])), shape=(len(nodes), len(nodes)))
-        spec = agent.goal_spec
-        horizon = int(agent.horizon) if lookahead is None else int(lookahead)
+        if isinstance(lookahead, bool) or not isinstance(lookahead, (int, np.integer)) or lookahead < 1:
+            raise ValueError(f"lookahead must be a positive int (edges to the subgoal), got {lookahead!r}.")
         if patience is not None and (isinstance(patience, bool) or not isinstance(patience, int) or patience < 1):
             raise ValueError(f"patience must be None or a positive int, got {patience!r}.")
         if stall_penalty is not None and (patience is None or not stall_penalty > 0):
@@ -345,12 +355,12 @@ class GraphSubgoals:
         moves = (states, next_states) if unstick == "real_move" else (None, None)
         return cls(
             nodes,
-            np.asarray(spec.goal_indices),
+            np.asarray(goal_indices),
             step,
             graph,
-            max(horizon, 1),
+            int(lookahead),
             threshold,
-            energy,
+            energy_of,
             cell,
             patience,
             unstick,
@@ -677,6 +687,24 @@ class FrontierSubgoals:
         return (graph.nodes[target] + moves * self._frontier_push[best])[dims]
 
 
+def _check_graph_settings(quantile: Any, cell: Any, edges: Any, energy: Any, aim: Any, real_hops: Any) -> None:
+    """Refuse a bad setting of :meth:`GraphSubgoals.from_transitions`, naming it and what it must be."""
+    if not 0.0 < quantile <= 1.0:
+        raise ValueError(f"quantile must be in (0, 1], got {quantile!r}.")
+    if not 0.0 < cell <= 1.0:
+        raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
+    check_edges(edges)
+    if edges in ("energy", "both") and energy is None:
+        raise ValueError(
+            f"edges={edges!r} needs a learned energy (energy=E(s, s')), got none; use edges='real' (a graph of the "
+            "moves made)."
+        )
+    if aim not in AIMS:
+        raise ValueError(f"aim must be one of {AIMS}, got {aim!r}.")
+    if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:
+        raise ValueError(f"real_hops must be a positive int (cells a real-move edge may span), got {real_hops!r}.")
+
+
 def _grid(step: np.ndarray, cell: float, period: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The cells' side [D] (``cell`` real steps; on a periodic dim the largest side at most that which divides the
     period) and the number of cells around each periodic dim ([D], 0 for the others)."""
@@ -777,34 +805,81 @@ def _real_moves(
     return np.asarray(found, dtype=np.int64).reshape(-1, 2)
 
 
-def check_edges(edges: Any, agent: Any = None) -> None:
-    """Refuse an unknown ``edges``, or edges from the energy for an agent that has none.
+def check_edges(edges: Any, has_energy: bool = True, owner: str = "the agent") -> None:
+    """Refuse an unknown ``edges``, or edges from the energy where there is no energy.
 
     :param edges: the ``edges`` argument of :meth:`GraphSubgoals.from_transitions`.
-    :param agent: the agent the graph is for (None: check the value only).
+    :param has_energy: whether the graph's owner has a learned energy (Action FF has none).
+    :param owner: the owner's name, for the message.
     :raises ValueError: naming the problem and the fix.
     """
     if edges not in EDGES:
         raise ValueError(f"edges must be one of {EDGES}, got {edges!r}.")
-    if agent is None or edges == "real":
-        return
-    if not (hasattr(type(agent), "energy_model") or hasattr(agent, "energy_model")):  # the class's, before setup
+    if edges != "real" and not has_energy:
         raise ValueError(
-            f"edges={edges!r} needs a learned energy, and {type(agent).__name__} has none; use edges='real' (a graph of "
-            "the moves the agent made)."
+            f"edges={edges!r} needs a learned energy, and {owner} has none; use edges='real' (a graph of the moves the "
+            "agent made)."
         )
 
 
-def check_long_horizon(subgoal_graph: SubgoalGraphConfig | None, explore: ExploreConfig | None, agent: Any) -> None:
-    """Refuse a graph whose edges need an energy for an agent that has none (a graph or exploration on).
+def subgoal_settings(
+    subgoal_class: type | None, subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None
+) -> SubgoalGraphConfig | dict[str, Any] | None:
+    """The keywords an agent builds its subgoals with: a :class:`SubgoalGraphConfig` for :class:`GraphSubgoals` (and
+    its subclasses), a plain dict for any other ``subgoal_class``; None: no subgoals.
 
-    :param subgoal_graph: the agent's graph config, or None.
+    :param subgoal_class: the agent's ``subgoal_class`` (None: :class:`GraphSubgoals`).
+    :param subgoal_graph: the agent's ``subgoal_graph`` (its keywords), or None; a ``subgoal_class`` given without
+        keywords builds with ``{}``.
+    :return: the settings.
+    :raises TypeError: a ``subgoal_class`` without ``from_transitions``, or a config given to a class that is not a
+        :class:`GraphSubgoals`.
+    :raises ValueError: naming unknown keys or a bad value of a :class:`SubgoalGraphConfig`.
+    """
+    if subgoal_class is None or (isinstance(subgoal_class, type) and issubclass(subgoal_class, GraphSubgoals)):
+        if subgoal_graph is None and subgoal_class is not None:
+            subgoal_graph = {}
+        return long_horizon_configs(subgoal_graph, None)[0]
+    if not isinstance(subgoal_class, type) or not callable(getattr(subgoal_class, "from_transitions", None)):
+        raise TypeError(
+            f"subgoal_class must be a class with a from_transitions(states, next_states, *, goal_indices, lookahead, "
+            f"energy, period, **subgoal_graph) builder (as GraphSubgoals), got {subgoal_class!r}."
+        )
+    if isinstance(subgoal_graph, SubgoalGraphConfig):
+        raise TypeError(
+            f"subgoal_graph is a SubgoalGraphConfig, the keywords of GraphSubgoals, but subgoal_class is "
+            f"{subgoal_class.__name__}; pass its keywords as a dict."
+        )
+    if subgoal_graph is not None and not isinstance(subgoal_graph, dict):
+        raise TypeError(f"subgoal_graph must be a dict of {subgoal_class.__name__}'s keywords, got {subgoal_graph!r}.")
+    return dict(subgoal_graph or {})
+
+
+def check_long_horizon(
+    subgoal_graph: SubgoalGraphConfig | dict[str, Any] | None,
+    explore: ExploreConfig | None,
+    subgoal_class: type | None,
+    has_energy: bool,
+    owner: str,
+) -> None:
+    """Refuse a graph whose edges need an energy for an agent that has none, and exploration without a graph.
+
+    :param subgoal_graph: the agent's subgoal settings (:func:`subgoal_settings`), or None.
     :param explore: the agent's exploration config, or None (exploring builds a graph with the default config).
-    :param agent: the agent.
+    :param subgoal_class: the agent's ``subgoal_class`` (None: :class:`GraphSubgoals`).
+    :param has_energy: whether the agent has a learned energy.
+    :param owner: the agent's class name, for messages.
     :raises ValueError: naming the problem and the fix.
     """
-    if subgoal_graph is not None or explore is not None:
-        check_edges((subgoal_graph or SubgoalGraphConfig()).edges, agent)
+    graph_class = subgoal_class is None or issubclass(subgoal_class, GraphSubgoals)
+    if explore is not None and not graph_class:
+        raise ValueError(
+            f"explore needs a GraphSubgoals graph (its frontier is read from the graph's cells), but subgoal_class is "
+            f"{subgoal_class.__name__}; leave subgoal_class None or pass a subclass of GraphSubgoals."  # type: ignore[union-attr]
+        )
+    if graph_class and (subgoal_graph is not None or explore is not None):
+        edges = subgoal_graph.edges if isinstance(subgoal_graph, SubgoalGraphConfig) else SubgoalGraphConfig().edges
+        check_edges(edges, has_energy, owner)
 
 
 class FrontierRebuild(BaseCallback):

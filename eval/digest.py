@@ -29,9 +29,9 @@ NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init
 @functools.lru_cache(maxsize=1)
 def neutral_settings() -> dict[str, dict[str, dict[str, Any]]]:
     """``neutral_settings.yaml``: ``{section: {class name: {name: value}}}`` (sections ``config_fields``,
-    ``arguments``, ``recorded_as``, ``env_inverse_dynamics``)."""
+    ``removed_fields``, ``arguments``, ``recorded_as``, ``env_inverse_dynamics``)."""
     data = yaml.safe_load(NEUTRAL_FILE.read_text()) or {}
-    sections = ("config_fields", "arguments", "recorded_as", "env_inverse_dynamics")
+    sections = ("config_fields", "removed_fields", "arguments", "recorded_as", "env_inverse_dynamics")
     return {section: dict(data.get(section) or {}) for section in sections}
 
 
@@ -40,6 +40,8 @@ def _plain(value: Any) -> Any:
         return value
     if isinstance(value, (tuple, list)):
         return [_plain(item) for item in value]
+    if isinstance(value, type):  # a class setting (subgoal_class): its name
+        return f"{value.__module__}.{value.__qualname__}"
     return type(value).__name__  # an object's repr may hold its address: its type is what is stable
 
 
@@ -96,8 +98,9 @@ Rules = dict[str, dict[str, dict[str, Any]]]
 
 
 def _config_defaults(config: type, fields: dict[str, Any] | None, neutral: Rules) -> dict[str, Any]:
-    """A config dataclass's fields (its defaults, less ``fields`` given), less those at their neutral value."""
-    values = dataclasses.asdict(config(**(fields or {})))
+    """A config dataclass's fields (its defaults, less ``fields`` given), less those at their neutral value, plus the
+    fields removed from it at the value their behaviour is now fixed at (``removed_fields``)."""
+    values = {**neutral.get("removed_fields", {}).get(config.__name__, {}), **dataclasses.asdict(config(**(fields or {})))}
     for name, value in neutral.get("config_fields", {}).get(config.__name__, {}).items():
         if name in values and values[name] == value:
             del values[name]

@@ -25,7 +25,7 @@ from ebm_agent.costs import PlanCost
 FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 TINY = {"horizon": 3, "planner_config": {"num_samples": 8, "iterations": 2}}
 AGENT_KWARGS = {
-    EBMPlannerAgent: {**TINY, "image_log_interval": 0, "online": {"adaptive_iterations": False}},
+    EBMPlannerAgent: {**TINY, "image_log_interval": 0},
     ActionFFAgent: TINY,
 }
 DOCUMENTED = (ValueError, TypeError)
@@ -182,8 +182,6 @@ BAD_VALUES: dict[type, dict[str, st.SearchStrategy]] = {
         "neg_replay_prob": st.one_of(st.floats(min_value=1.0, exclude_min=True), st.floats(max_value=0.0, exclude_max=True)),
         "pos_buffer_size": st.integers(max_value=0),
         "neg_buffer_size": st.integers(max_value=0),
-        "adapt_every": st.integers(max_value=0),
-        "max_iterations": st.integers(max_value=0),
     },
     MPPIConfig: {
         "num_samples": st.one_of(st.integers(max_value=0), st.booleans()),

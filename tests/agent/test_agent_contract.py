@@ -23,7 +23,7 @@ FAST_KWARGS = {
     EBMPlannerAgent: {
         "horizon": 5,
         "planner_config": {"num_samples": 16, "iterations": 4},
-        "online": {"adaptive_iterations": False, "pos_buffer_size": 10_000},
+        "online": {"pos_buffer_size": 10_000},
         "image_log_interval": 0,
     },
     ActionFFAgent: {

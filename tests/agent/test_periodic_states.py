@@ -13,7 +13,7 @@ from ebm_agent import EBMPlannerAgent
 FAST = {
     "horizon": 5,
     "planner_config": {"num_samples": 16, "iterations": 4},
-    "online": {"adaptive_iterations": False, "pos_buffer_size": 1_000},
+    "online": {"pos_buffer_size": 1_000},
     "image_log_interval": 0,
 }
 

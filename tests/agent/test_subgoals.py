@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import inspect
 from types import SimpleNamespace
+from typing import ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -12,8 +13,24 @@ import torch
 from stable_baselines3.common.callbacks import BaseCallback
 
 import envs  # noqa: F401  (registers the ids)
+from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
+from ebm_agent.moves import state_periods
 from ebm_agent.subgoals import ExploreConfig, FrontierSubgoals, GraphSubgoals, SubgoalGraphConfig
+
+
+def _build(layout: SimpleNamespace, states: np.ndarray, following: np.ndarray, **kwargs) -> GraphSubgoals:
+    """The graph an agent with ``layout``'s goal dims, horizon and energy (if any) builds: the keywords it hands the
+    builder (never the agent itself)."""
+    kwargs.setdefault("lookahead", layout.horizon)
+    return GraphSubgoals.from_transitions(
+        states,
+        following,
+        goal_indices=layout.goal_spec.goal_indices,
+        energy=getattr(layout, "energy_model", None),
+        period=state_periods(layout.goal_spec, states.shape[1]),
+        **kwargs,
+    )
 
 
 class WallEnergy(torch.nn.Module):
@@ -43,7 +60,7 @@ def _graph(**kwargs) -> GraphSubgoals:
         energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
     )
     states, following = _walk()
-    return GraphSubgoals.from_transitions(agent, states, following, **kwargs)
+    return _build(agent, states, following, **kwargs)
 
 
 def test_paths_go_round_the_wall_the_energy_knows():
@@ -72,15 +89,15 @@ def test_without_a_path_the_goal_is_kept():
     )
     states, following = _walk()
     left = states[:, 0] < 0  # visited only the left half: the right half is not in the graph
-    graph = GraphSubgoals.from_transitions(agent, states[left & (states[:, 1] < 0.4)], following[left & (states[:, 1] < 0.4)])
+    graph = _build(agent, states[left & (states[:, 1] < 0.4)], following[left & (states[:, 1] < 0.4)])
     goal = np.array([[0.8, -0.8]], np.float32)
     # The goal's nearest node is on the left; a start beyond the graph's reach still gets a path or the goal.
     out = graph.subgoals(np.array([[-0.5, -0.5]], np.float32), goal)
     assert out.shape == (1, 2) and np.all(np.isfinite(out))
     with pytest.raises(ValueError, match="non-empty"):
-        GraphSubgoals.from_transitions(agent, states[:0], following[:0])
+        _build(agent, states[:0], following[:0])
     with pytest.raises(ValueError, match="quantile"):
-        GraphSubgoals.from_transitions(agent, states, following, quantile=0.0)
+        _build(agent, states, following, quantile=0.0)
 
 
 def test_the_agent_plans_towards_the_subgoals_and_does_not_save_them(tmp_path, monkeypatch):
@@ -88,7 +105,7 @@ def test_the_agent_plans_towards_the_subgoals_and_does_not_save_them(tmp_path, m
         "MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, planner_config={"num_samples": 8, "iterations": 2}
     )
     states, following = _walk(steps=4000)
-    agent.subgoals = GraphSubgoals.from_transitions(agent, states, following)
+    agent.subgoals = _build(agent, states, following)
     seen = []
     original = agent._plan
 
@@ -142,7 +159,7 @@ def test_a_subgoal_is_never_across_cells_nobody_visited():
         horizon=40,
         goal_spec=SimpleNamespace(goal_indices=[0, 1]),
     )
-    graph = GraphSubgoals.from_transitions(flat, states[keep], following[keep], lookahead=40)
+    graph = _build(flat, states[keep], following[keep], lookahead=40)
     start, goal = np.array([[-0.6, 0.0]], np.float32), np.array([[0.6, 0.0]], np.float32)
     subgoal = graph.subgoals(start, goal)[0]
     segment = start[0] + np.linspace(0, 1, 200)[:, None] * (subgoal - start[0])
@@ -156,7 +173,7 @@ def _left_graph(**kwargs) -> GraphSubgoals:
     )
     states, following = _walk()
     keep = (states[:, 0] < -0.2) & (following[:, 0] < -0.2)
-    return GraphSubgoals.from_transitions(agent, states[keep], following[keep], **kwargs)
+    return _build(agent, states[keep], following[keep], **kwargs)
 
 
 def test_the_frontier_chosen_is_the_visited_edge_nearest_the_unseen_goal():
@@ -253,7 +270,7 @@ def _energy_free_agent() -> SimpleNamespace:
 
 def test_real_edges_are_the_moves_made_and_need_no_energy():
     states, following = _walk()
-    graph = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    graph = _build(_energy_free_agent(), states, following, edges="real")
     assert graph.energy is None and graph.num_edges > 0
     path = graph.path(np.array([-0.8, -0.8], np.float32), np.array([0.8, -0.8], np.float32))
     assert len(path) > 0 and path[:, 1].max() > 0.5  # round the wall that no real move crossed
@@ -275,21 +292,19 @@ def test_edges_from_both_join_the_energys_and_the_real_moves_and_bad_edges_are_r
         energy_model=WallEnergy(), device="cpu", horizon=10, goal_spec=SimpleNamespace(goal_indices=[0, 1])
     )
     states, following = _walk(steps=5000)
-    energy = GraphSubgoals.from_transitions(agent, states, following)
-    real = GraphSubgoals.from_transitions(agent, states, following, edges="real")
-    both = GraphSubgoals.from_transitions(agent, states, following, edges="both")
+    energy = _build(agent, states, following)
+    real = _build(agent, states, following, edges="real")
+    both = _build(agent, states, following, edges="both")
     union = set(zip(*energy.graph.nonzero())) | set(zip(*real.graph.nonzero()))
     assert set(zip(*both.graph.nonzero())) == union and real.num_edges > 0
     assert both.energy is not None and np.isfinite(both.energy_threshold)
     with pytest.raises(ValueError, match="edges must be one of"):
-        GraphSubgoals.from_transitions(agent, states, following, edges="walls")
+        _build(agent, states, following, edges="walls")
     with pytest.raises(ValueError, match="needs a learned energy"):
-        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="both")
+        _build(_energy_free_agent(), states, following, edges="both")
 
 
 def test_action_ff_explores_with_a_graph_of_its_real_moves_and_refuses_energy_edges():
-    from baselines.action_ff import ActionFFAgent
-
     env = gym.make("ebm/Maze-v0")
     graph, explore = {"edges": "real"}, {"every": 100}
     planner = {"iterations": 2}
@@ -305,9 +320,7 @@ def test_action_ff_explores_with_a_graph_of_its_real_moves_and_refuses_energy_ed
 
 def test_a_stalled_plan_repeats_a_real_move_from_nearby_that_got_closer_trying_the_next_one_each_time():
     states, following = _walk()
-    graph = GraphSubgoals.from_transitions(
-        _energy_free_agent(), states, following, edges="real", patience=2, unstick="real_move"
-    )
+    graph = _build(_energy_free_agent(), states, following, edges="real", patience=2, unstick="real_move")
     here, goal = np.array([[-0.9, -0.4]], np.float32), np.array([[-0.2, -0.8]], np.float32)
     target = graph._goal_node(goal[0])
     distance, _ = graph._paths_to(target)
@@ -334,23 +347,23 @@ def test_a_stalled_plan_repeats_a_real_move_from_nearby_that_got_closer_trying_t
 def test_unstick_is_checked():
     states, following = _walk(steps=2000)
     with pytest.raises(ValueError, match="unstick must be one of"):
-        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", unstick="jump")
-    graph = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+        _build(_energy_free_agent(), states, following, edges="real", unstick="jump")
+    graph = _build(_energy_free_agent(), states, following, edges="real")
     with pytest.raises(ValueError, match="needs the real transitions"):
         GraphSubgoals(graph.nodes, graph.goal_indices, graph.step, graph.graph, 10, np.inf, unstick="real_move")
 
 
 def test_real_hops_keeps_the_real_moves_that_crossed_a_cell_at_the_cost_of_the_cells_they_span():
     states, following = _walk(steps=5000)
-    one = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", clearance=0.0)
-    two = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", clearance=0.0, real_hops=2)
+    one = _build(_energy_free_agent(), states, following, edges="real", clearance=0.0)
+    two = _build(_energy_free_agent(), states, following, edges="real", clearance=0.0, real_hops=2)
     assert set(zip(*one.graph.nonzero())) < set(zip(*two.graph.nonzero()))
     cells = two._cell_of(two.nodes)
     rows, cols = two.graph.nonzero()
     spans = np.abs(cells[rows] - cells[cols]).max(axis=1)
     assert set(spans.tolist()) == {1, 2} and np.allclose(np.asarray(two.graph[rows, cols]).ravel(), spans)
     with pytest.raises(ValueError, match="real_hops"):
-        GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", real_hops=0)
+        _build(_energy_free_agent(), states, following, edges="real", real_hops=0)
 
 
 def test_a_stalled_plan_never_repeats_a_move_that_went_nowhere():
@@ -359,9 +372,7 @@ def test_a_stalled_plan_never_repeats_a_move_that_went_nowhere():
     offsets = np.stack(np.meshgrid(*[np.linspace(-0.02, 0.02, 5)] * 2), axis=-1).reshape(-1, 2)  # [25, 2]
     stuck = (here + offsets).astype(np.float32)  # moves refused from right beside here, some in cells nearer the goal
     states, following = np.concatenate([states, stuck]), np.concatenate([following, stuck])
-    graph = GraphSubgoals.from_transitions(
-        _energy_free_agent(), states, following, edges="real", patience=1, unstick="real_move"
-    )
+    graph = _build(_energy_free_agent(), states, following, edges="real", patience=1, unstick="real_move")
     graph.subgoals(here, goal)
     for _ in range(5):  # stalled: each call repeats a real move, never one that stayed put
         out = graph.subgoals(here, goal)[0]
@@ -371,8 +382,8 @@ def test_a_stalled_plan_never_repeats_a_move_that_went_nowhere():
 def test_aim_visited_puts_the_subgoals_on_states_the_agent_was_at():
     states, following = _walk()
     agent = _energy_free_agent()
-    centre = GraphSubgoals.from_transitions(agent, states, following, edges="real")
-    visited = GraphSubgoals.from_transitions(agent, states, following, edges="real", aim="visited")
+    centre = _build(agent, states, following, edges="real")
+    visited = _build(agent, states, following, edges="real", aim="visited")
     assert centre.aims is None and np.array_equal(visited.nodes, centre.nodes)  # the same graph
     assert visited.aims is not None and visited.aims.shape == visited.nodes.shape
     assert np.array_equal(visited._cell_of(visited.aims), visited._cell_of(visited.nodes))  # each in its node's cell
@@ -382,7 +393,7 @@ def test_aim_visited_puts_the_subgoals_on_states_the_agent_was_at():
     subgoal = visited.subgoals(start, goal)[0]
     assert any(np.array_equal(subgoal, a) for a in visited.aims) and not np.allclose(subgoal, goal[0])
     with pytest.raises(ValueError, match="aim must be one of"):
-        GraphSubgoals.from_transitions(agent, states, following, edges="real", aim="corner")
+        _build(agent, states, following, edges="real", aim="corner")
 
 
 def test_the_visited_state_of_a_cell_is_the_one_nearest_its_mean():
@@ -397,9 +408,7 @@ def test_the_visited_state_of_a_cell_is_the_one_nearest_its_mean():
 def test_a_stall_makes_the_first_edge_of_the_path_dearer_and_the_path_goes_another_way():
     states, following = _walk()
     here, goal = np.array([[-0.9, -0.4]], np.float32), np.array([[-0.2, -0.8]], np.float32)
-    graph = GraphSubgoals.from_transitions(
-        _energy_free_agent(), states, following, edges="real", patience=1, stall_penalty=1000.0
-    )
+    graph = _build(_energy_free_agent(), states, following, edges="real", patience=1, stall_penalty=1000.0)
     target = graph._goal_node(goal[0])
     before = graph._path_ahead(here[0], target)
     assert before is not None and len(before) > 1
@@ -410,10 +419,10 @@ def test_a_stall_makes_the_first_edge_of_the_path_dearer_and_the_path_goes_anoth
     assert graph.graph[before[0], before[1]] == cost + 1000.0
     after = graph._path_ahead(here[0], target)
     assert after is not None and after[:2] != before[:2]  # searched again: another first move
-    plain = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", patience=1)
+    plain = _build(_energy_free_agent(), states, following, edges="real", patience=1)
     for _ in range(3):
         plain.subgoals(here, goal)
-    fresh = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    fresh = _build(_energy_free_agent(), states, following, edges="real")
     assert (plain.graph != fresh.graph).nnz == 0  # without the penalty the graph never changes
 
 
@@ -421,7 +430,7 @@ def test_stall_penalty_needs_patience_and_a_positive_value():
     states, following = _walk(steps=2000)
     for kwargs in ({"stall_penalty": 5.0}, {"stall_penalty": 0.0, "patience": 2}):
         with pytest.raises(ValueError, match="stall_penalty must be None or > 0"):
-            GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", **kwargs)
+            _build(_energy_free_agent(), states, following, edges="real", **kwargs)
 
 
 def test_direct_when_nearer_plans_straight_at_a_goal_past_the_graph():
@@ -431,8 +440,8 @@ def test_direct_when_nearer_plans_straight_at_a_goal_past_the_graph():
     goal = np.array([[0.9, -0.8]], np.float32)
     past = np.array([[0.7, -0.75]], np.float32)  # nearer the goal than any node
     behind = np.array([[-0.8, -0.8]], np.float32)  # across the wall: the graph's way round still counts
-    follow = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
-    direct = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real", direct_when_nearer=True)
+    follow = _build(_energy_free_agent(), states, following, edges="real")
+    direct = _build(_energy_free_agent(), states, following, edges="real", direct_when_nearer=True)
     assert not np.allclose(follow.subgoals(past, goal), goal)  # back to the graph's node nearest the goal
     assert np.allclose(direct.subgoals(past, goal), goal)
     assert np.array_equal(direct.subgoals(behind, goal), follow.subgoals(behind, goal))
@@ -454,7 +463,7 @@ def _periodic_agent() -> SimpleNamespace:
 
 def test_a_periodic_dim_wraps_its_cells_steps_and_paths():
     states, following = _torus_walk()
-    graph = GraphSubgoals.from_transitions(_periodic_agent(), states, following, edges="real")
+    graph = _build(_periodic_agent(), states, following, edges="real")
     np.testing.assert_allclose(graph.step, 0.05, atol=1e-3)  # the wrapped moves, not the 2.0 jump across the wrap
     cells = graph._cell_of(graph.nodes)
     assert cells.min() == 0 and np.all(cells.max(axis=0) == graph._around - 1)  # the cells tile each circle
@@ -468,14 +477,14 @@ def test_a_periodic_dim_wraps_its_cells_steps_and_paths():
     gap = np.abs(np.mod(subgoal - goal + 1.0, 2.0) - 1.0)
     assert gap[0] < 0.2  # across the wrap, towards the goal
     # Without the period the same states make a graph whose steps span the circle (a move across the wrap is 2 long).
-    flat = GraphSubgoals.from_transitions(_energy_free_agent(), states, following, edges="real")
+    flat = _build(_energy_free_agent(), states, following, edges="real")
     assert flat.step.max() > 1.9
 
 
 def test_the_wrap_is_no_frontier_and_a_visited_aim_sits_on_its_side_of_the_wrap():
     states, following = _torus_walk()
     keep = np.abs(states[:, 0]) > 0.5  # a band across the wrap: x in [-1, -0.5) and (0.5, 1)
-    graph = GraphSubgoals.from_transitions(_periodic_agent(), states[keep], following[keep], edges="real", aim="visited")
+    graph = _build(_periodic_agent(), states[keep], following[keep], edges="real", aim="visited")
     frontier = FrontierSubgoals(graph, goal_heuristic=0.0)
     assert frontier.num_frontiers > 0
     assert np.all(np.abs(np.abs(frontier._frontier_points[:, 0]) - 0.5) < 0.2)  # only at the band's open sides
@@ -514,7 +523,9 @@ def test_the_long_horizon_settings_are_typed_configs(tmp_path):
     assert agent.subgoal_graph == graph and agent.explore == ExploreConfig(every=50)
     # the config's defaults are the builder's: a graph from {} is the graph from no keywords at all
     builder = inspect.signature(GraphSubgoals.from_transitions).parameters
-    assert {name: builder[name].default for name in SubgoalGraphConfig().kwargs()} == SubgoalGraphConfig().kwargs()
+    defaults = {name: builder[name].default for name in SubgoalGraphConfig().kwargs() if name != "lookahead"}
+    assert defaults == {k: v for k, v in SubgoalGraphConfig().kwargs().items() if k != "lookahead"}
+    assert SubgoalGraphConfig().lookahead is None and builder["lookahead"].default is inspect.Parameter.empty
     with pytest.raises(ValueError, match=r"aim must be one of \('centre', 'visited'\)"):
         SubgoalGraphConfig(aim="middle")
     with pytest.raises(ValueError, match="edges must be one of"):
@@ -526,3 +537,74 @@ def test_the_long_horizon_settings_are_typed_configs(tmp_path):
     agent.save(tmp_path / "old.zip")
     loaded = EBMPlannerAgent.load(tmp_path / "old.zip", env=gym.make("ebm/Maze-v0"), device="cpu")
     assert loaded.subgoal_graph == graph and loaded.explore == ExploreConfig(every=50)
+
+
+def test_the_graph_is_built_from_an_energy_function_not_from_an_agent():
+    states, following = _walk()
+    graph = GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=10, energy=WallEnergy())
+    start, goal = np.array([[-0.6, -0.6]], np.float32), np.array([[0.6, -0.6]], np.float32)
+    assert graph.subgoals(start, goal)[0, 1] > -0.6 + 0.1  # the path climbs round the wall's end at y = 0.5
+    with pytest.raises(ValueError, match=r"edges='energy' needs a learned energy \(energy=E\(s, s'\)\), got none"):
+        GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=10)
+    with pytest.raises(ValueError, match="lookahead must be a positive int"):
+        GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=0, edges="real")
+    with pytest.raises(ValueError, match=r"period must be a \[D\] = \[2\] array"):
+        GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=10, edges="real", period=[2.0])
+
+
+class HalfwaySubgoals:
+    """A stand-in subgoal provider: aims each plan ``fraction`` of the way from the state's goal dims to the goal, and
+    records what the agent handed its builder."""
+
+    built: ClassVar[list[dict]] = []
+
+    def __init__(self, goal_indices: np.ndarray, fraction: float) -> None:
+        self.goal_indices, self.fraction = goal_indices, fraction
+
+    @classmethod
+    def from_transitions(cls, states, next_states, *, goal_indices, lookahead, energy, period, fraction=0.5):
+        cls.built.append(
+            {"states": states.shape, "goal_indices": list(goal_indices), "lookahead": lookahead, "energy": energy}
+        )
+        return cls(np.asarray(goal_indices), fraction)
+
+    def subgoals(self, states: np.ndarray, goals: np.ndarray) -> np.ndarray:
+        here = states[:, self.goal_indices]  # [N, G]
+        return (here + self.fraction * (goals - here)).astype(np.float32)  # [N, G]
+
+
+def test_an_agent_takes_another_subgoal_class_with_its_keywords():
+    HalfwaySubgoals.built.clear()
+    env = gym.make("ebm/Particle-v0")
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy", env, horizon=4, subgoal_class=HalfwaySubgoals, subgoal_graph={"fraction": 0.25}, seed=0
+    )
+    states = np.zeros((8, 2), np.float32)
+    provider = agent.build_subgoals(states, states + 0.05)
+    assert isinstance(provider, HalfwaySubgoals) and provider.fraction == 0.25 and agent.subgoals is provider
+    (built,) = HalfwaySubgoals.built
+    assert built["states"] == (8, 2) and built["goal_indices"] == [0, 1] and built["lookahead"] == 4
+    assert built["energy"] is agent.energy_model  # the learned energy, not the agent
+    state, goal = np.zeros((1, 2), np.float32), np.ones((1, 2), np.float32)
+    np.testing.assert_allclose(agent._plan_goals(state, goal), 0.25)  # the plans aim where the provider says
+    # Action FF hands it no energy; a subclass of GraphSubgoals takes the typed config, built with {} when none is given
+    HalfwaySubgoals.built.clear()
+    ActionFFAgent("MultiInputPolicy", env, subgoal_class=HalfwaySubgoals).build_subgoals(states, states + 0.05)
+    assert HalfwaySubgoals.built[0]["energy"] is None
+
+    class Wider(GraphSubgoals):
+        pass
+
+    assert EBMPlannerAgent("MultiInputPolicy", env, subgoal_class=Wider).subgoal_graph == SubgoalGraphConfig()
+
+
+def test_a_bad_subgoal_class_fails_at_construction():
+    env = gym.make("ebm/Particle-v0")
+    with pytest.raises(TypeError, match=r"subgoal_class must be a class with a from_transitions"):
+        EBMPlannerAgent("MultiInputPolicy", env, subgoal_class=dict)
+    with pytest.raises(TypeError, match="pass its keywords as a dict"):
+        EBMPlannerAgent("MultiInputPolicy", env, subgoal_class=HalfwaySubgoals, subgoal_graph=SubgoalGraphConfig())
+    with pytest.raises(ValueError, match="explore needs a GraphSubgoals graph"):
+        EBMPlannerAgent("MultiInputPolicy", env, subgoal_class=HalfwaySubgoals, explore={})
+    with pytest.raises(ValueError, match="needs a learned energy, and ActionFFAgent has none"):
+        ActionFFAgent("MultiInputPolicy", env, subgoal_graph={})

@@ -8,8 +8,11 @@ from pathlib import Path
 
 import pytest
 
+from ebm_agent import EBMPlannerAgent
+from ebm_agent.config import OnlineConfig, make_config
 from ebm_agent.presets import PAPER_EBM
 from eval.cli import build_jobs, resolve_settings
+from eval.digest import class_defaults
 from eval.flags import build_parser
 from eval.jobs import Job
 from eval.paper.experiments import build_parts, make_context
@@ -116,3 +119,15 @@ def test_no_loss_comparison_reads_the_reference_interval() -> None:
     assert all(item.cells[0][0] == item.cells[1][0] + "_fast" for item in claim.comparisons)
     graph = next(spec for spec in CLAIMS if spec.kind == "no_loss" and "graph subgoals" in spec.text)
     assert [item.label for item in graph.comparisons] == ["particle", "reacher", "sawyer"]
+
+
+def test_a_removed_setting_fails_naming_why_and_the_digest_still_counts_it() -> None:
+    with pytest.raises(TypeError, match=r"online\.adaptive_iterations: the original's adaptive planning budget .* removed"):
+        make_config(OnlineConfig, {"adaptive_iterations": False}, "online")
+    online = class_defaults(EBMPlannerAgent)["online:OnlineConfig"]
+    # the recorded runs were made with the rule off: their digest holds the removed fields at those values
+    assert {k: online[k] for k in ("adaptive_iterations", "adapt_every", "max_iterations")} == {
+        "adaptive_iterations": False,
+        "adapt_every": 10,
+        "max_iterations": 800,
+    }
