@@ -662,7 +662,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         if has_plan.any():
             idx = np.where(has_plan)[0]
             drift = self._deviation(states[idx], plans[idx, steps[idx]], reduce="mean")
-            need[idx[drift > self.online.replan_threshold]] = True
+            # replan_threshold 0: a new plan at every step (receding-horizon MPC), whatever the drift
+            need[idx[(drift > self.online.replan_threshold) | (self.online.replan_threshold == 0)]] = True
             if self.online.arrival_threshold is not None:  # arrived: the rest of the plan would only hover
                 if self.online.arrival_at == "aim":
                     unit = np.broadcast_to(self._threshold_unit(), (spec.state_dim,))[spec.goal_indices]  # [G]
@@ -851,7 +852,9 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             for i in range(n):
                 executed[i].append((states[i], real_next[i], actions[i]))
             steps += 1
+            # deviation_threshold 0: every segment is one step (a new plan from the real state at every step)
             ended = (steps >= horizon) | dones | (deviation > self.online.deviation_threshold)
+            ended |= self.online.deviation_threshold == 0
             segments = []
             for i in np.where(ended)[0]:
                 seg_states, seg_next, seg_actions = (np.stack(col) for col in zip(*executed[i]))

@@ -38,9 +38,11 @@ class OnlineConfig:
     """How the agent acts, when it replans and what it trains on; defaults follow the original code (§2, §5, §8).
 
     :param deviation_threshold: during ``learn``, a plan ends when max |planned - real| over the model dims exceeds
-        this (0.7 in the original for 2-D envs and Reacher; set it per env, e.g. lower for the arm).
+        this (0.7 in the original for 2-D envs and Reacher; set it per env, e.g. lower for the arm); 0: every
+        segment is one step, a new plan from the real state at every step.
     :param replan_threshold: during ``predict``, replan when mean |planned - real| exceeds this (0.55 for 2-D and
-        Reacher, 0.3 for the arm in the original's evaluation) or the plan runs out.
+        Reacher, 0.3 for the arm in the original's evaluation) or the plan runs out; 0: at every step, as a
+        receding-horizon MPC (pytorch_mppi, TD-MPC2) replans.
     :param arrival_threshold: during ``predict``, also replan when the real state is within this (max |.| over the
         model dims) of the plan's final state before the plan runs out: the plan has arrived (typically at a subgoal
         of :mod:`ebm_agent.subgoals`, which sits closer than the horizon's reach) and its remaining steps would only
@@ -152,8 +154,9 @@ class OnlineConfig:
             if getattr(self, name) not in choices:
                 raise ValueError(f"OnlineConfig.{name} must be one of {choices}, got {getattr(self, name)!r}.")
         for name in ("deviation_threshold", "replan_threshold"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"OnlineConfig.{name} must be > 0, got {getattr(self, name)!r}.")
+            if not getattr(self, name) >= 0:
+                value = getattr(self, name)
+                raise ValueError(f"OnlineConfig.{name} must be >= 0 (0: a new plan at every step), got {value!r}.")
         if self.arrival_threshold is not None and not self.arrival_threshold >= 0:
             raise ValueError(f"OnlineConfig.arrival_threshold must be None (off) or >= 0, got {self.arrival_threshold!r}.")
         for name in ("random_action_prob", "neg_replay_prob"):

@@ -177,8 +177,8 @@ def test_planner_rejects_non_finite_inputs(bad):
 # ----------------------------------------------------------------------------------------------- configs
 BAD_VALUES: dict[type, dict[str, st.SearchStrategy]] = {
     OnlineConfig: {
-        "deviation_threshold": st.one_of(st.floats(max_value=0.0), st.just(float("nan"))),
-        "replan_threshold": st.floats(max_value=0.0),
+        "deviation_threshold": st.one_of(st.floats(max_value=0.0, exclude_max=True), st.just(float("nan"))),
+        "replan_threshold": st.floats(max_value=0.0, exclude_max=True),
         "neg_replay_prob": st.one_of(st.floats(min_value=1.0, exclude_min=True), st.floats(max_value=0.0, exclude_max=True)),
         "pos_buffer_size": st.integers(max_value=0),
         "neg_buffer_size": st.integers(max_value=0),

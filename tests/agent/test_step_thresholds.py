@@ -185,3 +185,18 @@ def test_the_measured_step_is_saved_with_the_agent(tmp_path: Any) -> None:
     np.testing.assert_array_equal(loaded.real_moves.largest, agent.real_moves.largest)
     assert loaded.real_moves.count == 3
     assert _replanned(loaded, 10.0) == [2, 3, 4]
+
+
+@pytest.mark.parametrize("units", ["state", "step"])
+def test_a_zero_threshold_replans_at_every_step(units: str) -> None:
+    every = _agent(1.0, {"threshold_units": units, "replan_threshold": 0.0})
+    every._record_real_moves(*_real_moves(1.0))
+    assert _replanned(every, 1.0) == [0, 1, 2, 3, 4, 5]  # the envs that did not drift too (the control: [2, 3, 4] above)
+    learner = _agent(1.0, {"threshold_units": units, "deviation_threshold": 0.0}, horizon=5)
+    learner.learn(40)
+    assert learner.num_plans >= 40  # every segment is one step: a new plan from the real state at every step
+    control = _agent(1.0, {"threshold_units": units}, horizon=5)
+    control.learn(40)
+    assert control.num_plans < 30  # the default deviation lets plans run for several steps
+    with pytest.raises(ValueError, match=r"replan_threshold must be >= 0 \(0: a new plan at every step\)"):
+        OnlineConfig(replan_threshold=-1.0)
