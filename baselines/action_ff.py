@@ -269,16 +269,6 @@ class ActionFFAgent(PlannerAgentBase):
             device=device,
             _init_setup_model=False,
         )
-        if self.online.hard_negatives:
-            raise ValueError(
-                "online.hard_negatives is an option of the EBM agent (a labelled negative of its energy); "
-                "Action FF learns a forward model from real transitions only. Leave it False."
-            )
-        if self.online.l2_final is not None:
-            raise ValueError(
-                "online.l2_final anneals the EBM's L2 term on its energies; Action FF's forward model has no such "
-                "term. Leave it None."
-            )
         if _init_setup_model:
             self._setup_model()
 

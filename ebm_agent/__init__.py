@@ -12,7 +12,7 @@ The main entry point is :class:`EBMPlannerAgent`, an SB3 ``BaseAlgorithm``::
 
 from ebm_agent.agent import CostConfig, EBMPlannerAgent
 from ebm_agent.base import PlannerAgentBase
-from ebm_agent.config import OnlineConfig
+from ebm_agent.config import OnlineConfig, TrainingConfig
 from ebm_agent.costs import BoxObstacleEnergy, GaussianGoalEnergy, PlanCost, RampedGoalEnergy, RewardGoalEnergy
 from ebm_agent.datasets import TransitionDataset, collect_random_transitions
 from ebm_agent.energy import EnergyConfig, EnergyModel
@@ -37,6 +37,7 @@ __all__ = [
     "PlannerAgentBase",
     "RampedGoalEnergy",
     "RewardGoalEnergy",
+    "TrainingConfig",
     "TransitionDataset",
     "__version__",
     "collect_random_transitions",

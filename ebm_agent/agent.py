@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
@@ -13,7 +14,16 @@ from stable_baselines3.common.type_aliases import GymEnv
 
 from ebm_agent.base import PlannerAgentBase, Segment
 from ebm_agent.buffers import TransitionBatch, TransitionBuffer
-from ebm_agent.config import OnlineConfig, check_field_types, learn_budgets, make_config, planner_horizon
+from ebm_agent.config import (
+    TRAINING_FROM_ARGUMENTS,
+    TRAINING_FROM_ONLINE,
+    OnlineConfig,
+    TrainingConfig,
+    check_field_types,
+    learn_budgets,
+    make_config,
+    planner_horizon,
+)
 from ebm_agent.costs import (
     AccelerationPrior,
     ExtraEnergy,
@@ -43,9 +53,6 @@ GOAL_ENERGIES: dict[str, Callable[..., GoalEnergy]] = {
 }
 """Goal energies by name; pass an instance to ``cost=`` for anything else."""
 
-LOSSES: tuple[str, ...] = ("cd", "infonce", "infonce_reach", "infonce_perturb")
-"""Energy objectives by name (``loss=``)."""
-
 PLANNERS: dict[str, tuple[type, type]] = {"mppi": (MPPIPlanner, MPPIConfig), "langevin": (LangevinPlanner, LangevinConfig)}
 """Planners by name with their config types."""
 
@@ -65,6 +72,8 @@ class CostConfig:
         weight, as the original's particle, maze and Reacher did.
     :param velocity_weight: weight of the velocity prior (v_coeff).
     :param acceleration_weight: weight of the acceleration prior (a_coeff).
+    :param warmup_plans: number of plans over which the goal and prior weights ramp from 0 to 1 during ``learn`` (the
+        original's ``l2_weight = min(itr / 200, 1)``); 0 disables the warm-up.
     """
 
     goal_energy: str = "reward"
@@ -72,12 +81,13 @@ class CostConfig:
     eval_goal_weight: float | None = 10.0
     velocity_weight: float = 0.0
     acceleration_weight: float = 1.0
+    warmup_plans: int = 200
 
     def __post_init__(self) -> None:
         check_field_types(self)
         if self.goal_energy not in GOAL_ENERGIES:
             raise ValueError(f"CostConfig.goal_energy must be one of {sorted(GOAL_ENERGIES)}, got {self.goal_energy!r}.")
-        for name in ("goal_weight", "velocity_weight", "acceleration_weight"):
+        for name in ("goal_weight", "velocity_weight", "acceleration_weight", "warmup_plans"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"CostConfig.{name} must be >= 0, got {getattr(self, name)!r}.")
 
@@ -106,26 +116,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         a copy, so the caller's object is never changed.
     :param energy: :class:`EnergyConfig` or a dict of its fields.
     :param cost: :class:`CostConfig` or a dict of its fields.
-    :param loss: ``"cd"`` (the paper's contrastive loss), ``"infonce"`` (each positive against the batch's sampled
-        negatives) or ``"infonce_reach"``: each real (s, s') against ``reach_candidates`` next states drawn uniformly in
-        the one-step reach box around s (:func:`~ebm_agent.losses.reach_candidates`), so that E(s, s') learns
-        -log p(s' | s) up to a constant and rises where the env refuses a move (issue #34). Its energy scale is in
-        nats: a transition E higher than another is e^E times less likely under the data's policy; ``l2_coeff`` then
-        weighs a term mean E(s, s')^2 over the real transitions that pins their energy to 0, since InfoNCE alone
-        leaves a free offset per state. That loss ignores the planned and sampled negatives. Off by default (the
-        paper's CD). ``"infonce_perturb"``: the same objective and anchor with the ``perturbed_negatives`` near misses
-        of each real s' (Gaussian, per-dim scale of the real moves) as its contrast set instead of the reach box, so
-        that the energy resolves next states finer than the box: conditional on s, it carries no term of the
-        visited states' density, which the planned negatives of CD put into it.
-    :param reach_candidates: K, uniform candidates per positive of ``loss="infonce_reach"`` (64); unused otherwise.
-    :param l2_coeff: weight of the energy-magnitude regulariser of the CD loss (1.0).
-    :param perturbed_negatives: M > 0 adds, to the CD loss, M negatives per real transition (s, s'): (s, s' + eps)
-        with eps ~ N(0, (c std(s' - s))^2) per state dim, c drawn per negative from ``perturb_scales`` and std the
-        running std of the real moves (periodic dims wrapped). Where the env's next states lie on a thin set (fewer
-        action than state dims, e.g. Reacher's angles that must move by their velocities), such near misses are
-        transitions it cannot make, which the planned negatives alone rarely show the energy. The loss then weighs
-        the planned and the perturbed negatives' means equally. 0 (off, the paper's).
-    :param perturb_scales: the noise scales c of ``perturbed_negatives``, in units of the real moves' per-dim std.
+    :param training: :class:`~ebm_agent.config.TrainingConfig` or a dict of its fields: how the energy learns (the
+        contrastive loss and its L2 term, planned, perturbed and hard negatives, the L2 anneal).
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
     :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"``, an instance, or None (the default): the
@@ -160,11 +152,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         planner_config: MPPIConfig | LangevinConfig | dict[str, Any] | None = None,
         energy: EnergyConfig | dict[str, Any] | None = None,
         cost: CostConfig | dict[str, Any] | None = None,
-        loss: str = "cd",
-        l2_coeff: float = 1.0,
-        reach_candidates: int = 64,
-        perturbed_negatives: int = 0,
-        perturb_scales: Sequence[float] = (0.25, 0.5, 1.0, 2.0),
+        training: TrainingConfig | dict[str, Any] | None = None,
         clip_sigma: float | None = 3.0,
         online: OnlineConfig | dict[str, Any] | None = None,
         inverse_dynamics: str | InverseDynamics | None = None,
@@ -182,10 +170,6 @@ class EBMPlannerAgent(PlannerAgentBase):
     ) -> None:
         if isinstance(planner, str) and planner not in PLANNERS:
             raise ValueError(f"planner must be one of {sorted(PLANNERS)} or a Planner instance, got {planner!r}.")
-        if loss not in LOSSES:
-            raise ValueError(f"loss must be one of {LOSSES} ('cd' is the paper's), got {loss!r}.")
-        if isinstance(reach_candidates, bool) or not isinstance(reach_candidates, int) or reach_candidates < 1:
-            raise ValueError(f"reach_candidates must be a positive int, got {reach_candidates!r}.")
         self.planner_kind = planner
         if isinstance(planner, str):
             config_type = PLANNERS[planner][1]
@@ -198,18 +182,7 @@ class EBMPlannerAgent(PlannerAgentBase):
             horizon = planner.horizon
         self.energy_config = make_config(EnergyConfig, energy, "energy")
         self.cost_config = make_config(CostConfig, cost, "cost")
-        self.loss = loss
-        self.l2_coeff = l2_coeff
-        self.reach_candidates = reach_candidates
-        if isinstance(perturbed_negatives, bool) or not isinstance(perturbed_negatives, int) or perturbed_negatives < 0:
-            raise ValueError(f"perturbed_negatives must be an int >= 0, got {perturbed_negatives!r}.")
-        if loss == "infonce_perturb" and perturbed_negatives < 1:
-            raise ValueError("loss='infonce_perturb' needs perturbed_negatives >= 1 (its contrast set per real transition).")
-        scales = tuple(float(c) for c in perturb_scales)
-        if not scales or not all(np.isfinite(c) and c > 0 for c in scales):
-            raise ValueError(f"perturb_scales must be a non-empty sequence of finite scales > 0, got {perturb_scales!r}.")
-        self.perturbed_negatives = perturbed_negatives
-        self.perturb_scales = scales
+        self.training = make_config(TrainingConfig, training, "training")
         self.clip_sigma = clip_sigma
         self.image_log_interval = image_log_interval
         self.extra_energies: list[ExtraEnergy] = []
@@ -231,30 +204,33 @@ class EBMPlannerAgent(PlannerAgentBase):
             device=device,
             _init_setup_model=False,
         )
-        if self.online.hard_negatives and loss != "cd":
-            raise ValueError(
-                f"online.hard_negatives adds a term to the CD loss; loss={loss!r} would ignore the failed steps. "
-                "Use loss='cd' or leave hard_negatives False."
-            )
-        if self.online.hard_negatives and perturbed_negatives > 0:
-            raise ValueError(
-                "online.hard_negatives and perturbed_negatives are two different CD losses and cannot be combined; "
-                "set one of them."
-            )
         if _init_setup_model:
             self._setup_model()
 
     # ------------------------------------------------------------------ setup
+    def _upgrade_saved_settings(self) -> dict[str, Any]:
+        """A model saved before issue 45 held its training settings as constructor attributes (``loss``,
+        ``l2_coeff``, ...) and in ``online`` (hard negatives, the L2 anneal, the negative buffer), and the cost's
+        warm-up in ``online.prior_warmup_plans``: they become ``training`` and ``cost_config.warmup_plans``."""
+        legacy = super()._upgrade_saved_settings()
+        arguments = {name: self.__dict__.pop(name) for name in TRAINING_FROM_ARGUMENTS if name in self.__dict__}
+        moved = {name: legacy[name] for name in TRAINING_FROM_ONLINE if name in legacy}
+        if arguments or moved:
+            self.training = TrainingConfig(**arguments, **moved)
+        if "prior_warmup_plans" in legacy:
+            self.cost_config = dataclasses.replace(self.cost_config, warmup_plans=int(legacy["prior_warmup_plans"]))
+        return legacy
+
     def _build_model(self) -> None:
         spec = self.goal_spec
         assert spec is not None
-        # The training objective, built once from the settings (online's hard-negative ones as at construction).
+        # The training objective, built once from the settings (``training``).
         self.loss_fn: EnergyLoss = make_loss(
-            self.loss,
-            self.perturbed_negatives,
-            self.online.hard_negative_loss,
-            self.online.hard_negative_weight,
-            self.online.hard_negative_margin,
+            self.training.loss,
+            self.training.perturbed_negatives,
+            self.training.hard_negative_loss,
+            self.training.hard_negative_weight,
+            self.training.hard_negative_margin,
         )
         periodic = spec.goal_indices.tolist() if spec.goal_period is not None else []
         energy = EnergyModel(
@@ -271,12 +247,14 @@ class EBMPlannerAgent(PlannerAgentBase):
             learning_rate=self.lr_schedule(1.0),
             clip_sigma=self.clip_sigma,
         ).to(self.device)
-        self.neg_buffer = TransitionBuffer(self.online.neg_buffer_size, spec.state_dim, None, seed=self._base_seed() + 3)
-        # Failed plan steps (online.hard_negatives): states s_t, next_states s'_plan (the impossible target) and, in
+        self.neg_buffer = TransitionBuffer(self.training.neg_buffer_size, spec.state_dim, None, seed=self._base_seed() + 3)
+        # Failed plan steps (training.hard_negatives): states s_t, next_states s'_plan (the impossible target) and, in
         # the action slot, s'_real (where the env actually went), so its "action_dim" is D.
         self.hard_negative_buffer = (
-            TransitionBuffer(self.online.hard_negative_buffer_size, spec.state_dim, spec.state_dim, seed=self._base_seed() + 5)
-            if self.online.hard_negatives
+            TransitionBuffer(
+                self.training.hard_negative_buffer_size, spec.state_dim, spec.state_dim, seed=self._base_seed() + 5
+            )
+            if self.training.hard_negatives
             else None
         )
         if isinstance(self.planner_kind, str):
@@ -355,7 +333,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         init_actions: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
         cost = self.plan_cost.with_extra(*self.extra_energies) if self.extra_energies else self.plan_cost
-        warmup = self.online.prior_warmup_plans
+        warmup = self.cost_config.warmup_plans
         cost.prior_scale = min(self.num_plans / warmup, 1.0) if (training and warmup > 0) else 1.0
         goal_energy = cost.goal_energy
         eval_weight = self.cost_config.eval_goal_weight
@@ -377,20 +355,20 @@ class EBMPlannerAgent(PlannerAgentBase):
     # --------------------------------------------------------------- training
     def scheduled_l2_coeff(self) -> float:
         """The L2 term's weight at the current point of ``learn``: ``l2_coeff``, annealed linearly to
-        ``online.l2_final`` between the fractions ``online.l2_anneal_start`` and ``l2_anneal_end`` of the budget.
+        ``training.l2_final`` between the fractions ``training.l2_anneal_start`` and ``l2_anneal_end`` of the budget.
 
         :return: the weight (``l2_coeff`` when no anneal is set, before the anneal, or outside ``learn``).
         """
-        final, online = self.online.l2_final, self.online
+        final, online = self.training.l2_final, self.training
         total = int(getattr(self, "_total_timesteps", 0) or 0)
         if final is None or total <= 0:
-            return float(self.l2_coeff)
+            return float(self.training.l2_coeff)
         progress = min(self.num_timesteps / total, 1.0)
         if progress < online.l2_anneal_start:
-            return float(self.l2_coeff)
+            return float(self.training.l2_coeff)
         span = online.l2_anneal_end - online.l2_anneal_start
         weight = 1.0 if span <= 0 else min((progress - online.l2_anneal_start) / span, 1.0)
-        return float(self.l2_coeff + weight * (final - self.l2_coeff))
+        return float(self.training.l2_coeff + weight * (final - self.training.l2_coeff))
 
     def _train_on_segments(self, segments: list[Segment]) -> dict[str, float]:
         fresh = self._fresh_positives(segments)  # their real moves are in real_moves already (_run_online)
@@ -400,16 +378,16 @@ class EBMPlannerAgent(PlannerAgentBase):
         neg_states = np.concatenate([s.planned[:-1] for s in segments])  # [M, D]
         neg_next = np.concatenate([s.planned[1:] for s in segments])  # [M, D]
         neg_states, neg_next = self._replay_negatives(neg_states, neg_next)
-        hard, num_failed = self._hard_negatives(segments) if self.online.hard_negatives else (None, 0)
+        hard, num_failed = self._hard_negatives(segments) if self.training.hard_negatives else (None, 0)
         l2_coeff = self.scheduled_l2_coeff()
         stats: dict[str, float] = {}
         if self.online.train_every_plan:
             stats = self._gradient_step(
                 positives.states, positives.next_states, neg_states, neg_next, hard=hard, l2_coeff=l2_coeff
             )
-        if self.online.l2_final is not None:
+        if self.training.l2_final is not None:
             stats["l2_coeff"] = l2_coeff
-        if self.online.hard_negatives:
+        if self.training.hard_negatives:
             stats["failed_steps"] = float(num_failed)
         if self.inverse_model is not None and positives.actions is not None:
             stats.update(
@@ -435,17 +413,18 @@ class EBMPlannerAgent(PlannerAgentBase):
         count = len(states)
         if len(self.neg_buffer) > count:
             replay = self.neg_buffer.sample(count)
-            swap = self.neg_buffer.rng.random(count) < self.online.neg_replay_prob
+            swap = self.neg_buffer.rng.random(count) < self.training.neg_replay_prob
             mixed_states[swap], mixed_next[swap] = replay.states[swap], replay.next_states[swap]
         self.neg_buffer.add(states, next_states)
         return mixed_states, mixed_next
 
     def _hard_negatives(self, segments: list[Segment]) -> tuple[TransitionBatch | None, int]:
-        """The failed plan steps of ``segments`` plus up to ``hard_negative_batch`` replayed ones (``online.hard_negatives``).
+        """The failed plan steps of ``segments`` plus up to ``hard_negative_batch`` replayed ones
+        (``training.hard_negatives``).
 
         Step i of a segment failed when max |planned[i + 1] - real_next_states[i]| over the model dims exceeds
-        ``online.hard_negative_threshold``: the agent aimed from the real state at the planned one and the env went
-        elsewhere. With ``online.hard_negative_reach`` the planned state is first clipped into the reach box of the
+        ``training.hard_negative_threshold``: the agent aimed from the real state at the planned one and the env went
+        elsewhere. With ``training.hard_negative_reach`` the planned state is first clipped into the reach box of the
         real moves seen so far (:meth:`real_moves`, which must have been given the segments' transitions). The fresh
         failed steps are stored after the replayed ones are drawn (as the planned negatives).
 
@@ -455,16 +434,16 @@ class EBMPlannerAgent(PlannerAgentBase):
             the number of fresh failed steps.
         """
         buffer = self.hard_negative_buffer
-        assert buffer is not None, "hard_negative_buffer is built when online.hard_negatives is True"
+        assert buffer is not None, "hard_negative_buffer is built when training.hard_negatives is True"
         states = np.concatenate([s.real_states for s in segments])  # [k, D]
         real_next = np.concatenate([s.real_next_states for s in segments])  # [k, D]
         planned_next = np.concatenate([s.planned[1:] for s in segments])  # [k, D]
-        if self.online.hard_negative_reach:
+        if self.training.hard_negative_reach:
             reach = self.real_moves.largest  # [D]
             planned_next = states + np.clip(planned_next - states, -reach, reach)  # [k, D]
-        failed = self._deviation(real_next, planned_next, reduce="max") > self.online.hard_negative_threshold  # [k]
+        failed = self._deviation(real_next, planned_next, reduce="max") > self.training.hard_negative_threshold  # [k]
         fresh = TransitionBatch(states[failed], planned_next[failed], real_next[failed])  # [F, D] each
-        replay_count = min(len(buffer), int(self.online.hard_negative_batch))
+        replay_count = min(len(buffer), int(self.training.hard_negative_batch))
         if replay_count > 0:
             replay = buffer.sample(replay_count)  # [R, D] each
             assert replay.actions is not None
@@ -494,15 +473,15 @@ class EBMPlannerAgent(PlannerAgentBase):
         :param pos_next: [P, D] real next states.
         :param neg_states: [M, D] planned states.
         :param neg_next: [M, D] planned next states.
-        :param hard: failed plan steps (``online.hard_negatives``): states s_t [H, D], next_states s'_plan [H, D],
+        :param hard: failed plan steps (``training.hard_negatives``): states s_t [H, D], next_states s'_plan [H, D],
             actions s'_real [H, D]; None for none. Not used by ``loss="infonce_reach"`` and ``"infonce"``.
-        :param l2_coeff: the L2 term's weight for this step (None: ``self.l2_coeff``; see :meth:`scheduled_l2_coeff`).
+        :param l2_coeff: the L2 term's weight for this step (None: ``self.training.l2_coeff``; see :meth:`scheduled_l2_coeff`).
         :return: loss statistics.
         :raises FloatingPointError: on a NaN/inf loss or gradient (the weights are left untouched).
         """
         energy = self.energy_model
-        l2 = self.l2_coeff if l2_coeff is None else l2_coeff
-        if self.perturbed_negatives > 0 or self.energy_config.move_input:
+        l2 = self.training.l2_coeff if l2_coeff is None else l2_coeff
+        if self.training.perturbed_negatives > 0 or self.energy_config.move_input:
             moves = self.real_moves
             energy.set_move_statistics(moves.mean, moves.std)
         self.policy.set_training_mode(True)
@@ -511,7 +490,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         candidates = None  # [P, K, D] the loss's contrast set of each real state, where it has one
         if self.loss_fn.contrast == "reach":
             radius = torch.as_tensor(self.real_moves.largest, device=self.device).clamp_min(1e-6)  # [D]
-            candidates = reach_candidates(states, radius, self.reach_candidates, self._generator)
+            candidates = reach_candidates(states, radius, self.training.reach_candidates, self._generator)
         elif self.loss_fn.contrast == "perturbed":
             candidates = as_tensor(self._perturbed_next_states(pos_states, pos_next))
         batch = ContrastBatch(
@@ -549,9 +528,9 @@ class EBMPlannerAgent(PlannerAgentBase):
         :return: [P, M, D] perturbed next states (float32).
         """
         std = self.real_moves.std  # [D]
-        shape = (len(states), self.perturbed_negatives, states.shape[1])
-        scales = torch.as_tensor(self.perturb_scales, dtype=torch.float32, device=self.device)
-        pick = torch.randint(len(self.perturb_scales), shape[:2], generator=self._generator, device=self.device)
+        shape = (len(states), self.training.perturbed_negatives, states.shape[1])
+        scales = torch.as_tensor(self.training.perturb_scales, dtype=torch.float32, device=self.device)
+        pick = torch.randint(len(self.training.perturb_scales), shape[:2], generator=self._generator, device=self.device)
         noise = torch.randn(shape, generator=self._generator, device=self.device) * scales[pick][..., None]  # [P, M, D]
         noise = noise * torch.as_tensor(std, dtype=torch.float32, device=self.device)
         return (torch.as_tensor(next_states, dtype=torch.float32, device=self.device)[:, None, :] + noise).cpu().numpy()
@@ -597,7 +576,7 @@ class EBMPlannerAgent(PlannerAgentBase):
         return super().learn_offline(dataset, epochs, batch_size, sequential, log_interval, tb_log_name)
 
     def _offline_step(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
-        if self.loss in ("infonce_reach", "infonce_perturb"):  # its contrast set is drawn in the gradient step
+        if self.training.loss in ("infonce_reach", "infonce_perturb"):  # its contrast set is drawn in the gradient step
             neg_states, neg_next = states, next_states
         else:
             negatives = self._sample_negatives(states, self._negative_radius, self._num_candidates)

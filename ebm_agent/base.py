@@ -8,6 +8,7 @@ with the plan carried in ``state``, lives here so the EBM agent and the Action F
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from collections.abc import Sequence
@@ -274,6 +275,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """Build the networks, planner, buffers and inverse dynamics from the (possibly loaded) attributes."""
         self._setup_lr_schedule()
         self.set_random_seed(self.seed)
+        self._upgrade_saved_settings()
         # A model saved before these were typed holds them as dicts (and no subgoal_class).
         self.subgoal_class = getattr(self, "subgoal_class", None)
         self.subgoal_graph = subgoal_settings(self.subgoal_class, self.subgoal_graph)
@@ -295,6 +297,22 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         )
         self._build_model()
         self._build_inverse_dynamics()
+
+    def _upgrade_saved_settings(self) -> dict[str, Any]:
+        """Bring the settings of a model saved by an earlier version to today's configs (``load`` restores the saved
+        attributes as they were pickled): ``online`` keeps only today's :class:`OnlineConfig` fields.
+
+        :return: the saved ``online``'s fields that :class:`OnlineConfig` no longer has (moved elsewhere or
+            removed), for a subclass to carry over.
+        """
+        if not isinstance(self.online, OnlineConfig):
+            return {}
+        known = {field.name for field in dataclasses.fields(OnlineConfig)}
+        saved = vars(self.online)
+        legacy = {name: value for name, value in saved.items() if name not in known}
+        if legacy:
+            self.online = OnlineConfig(**{name: getattr(self.online, name) for name in known})
+        return legacy
 
     def _base_seed(self) -> int:
         return 0 if self.seed is None else int(self.seed)

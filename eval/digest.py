@@ -29,9 +29,18 @@ NOT_MEASURED = frozenset({"tensorboard_log", "verbose", "seed", "device", "_init
 @functools.lru_cache(maxsize=1)
 def neutral_settings() -> dict[str, dict[str, dict[str, Any]]]:
     """``neutral_settings.yaml``: ``{section: {class name: {name: value}}}`` (sections ``config_fields``,
-    ``removed_fields``, ``arguments``, ``recorded_as``, ``env_inverse_dynamics``)."""
+    ``removed_fields``, ``moved_settings``, ``fixed_settings``, ``arguments``, ``recorded_as``,
+    ``env_inverse_dynamics``)."""
     data = yaml.safe_load(NEUTRAL_FILE.read_text()) or {}
-    sections = ("config_fields", "removed_fields", "arguments", "recorded_as", "env_inverse_dynamics")
+    sections = (
+        "config_fields",
+        "removed_fields",
+        "moved_settings",
+        "fixed_settings",
+        "arguments",
+        "recorded_as",
+        "env_inverse_dynamics",
+    )
     return {section: dict(data.get(section) or {}) for section in sections}
 
 
@@ -68,6 +77,8 @@ def class_defaults(
     neutral_arguments = neutral.get("arguments", {}).get(name_of, {})
     recorded_as = neutral.get("recorded_as", {}).get(name_of, {})
     module = vars(sys.modules[agent_class.__module__])
+    moved = neutral.get("moved_settings", {}).get(name_of, {})
+    sources = {path.split(".")[0] for path in moved}  # arguments whose config fields move back, neutral or not
     defaults: dict[str, Any] = {}
     for name, parameter in inspect.signature(agent_class).parameters.items():
         if parameter.default is inspect.Parameter.empty or name in NOT_MEASURED:
@@ -75,10 +86,12 @@ def class_defaults(
         override = overrides.get(name)
         value = parameter.default if (name not in overrides or isinstance(override, dict)) else override
         if name in neutral_arguments and _plain(value) == _plain(neutral_arguments[name]):
-            continue  # an argument added later, at the value that changes nothing
-        if value is None and name in recorded_as:
-            value = recorded_as[name]
-        defaults[name] = _plain(value)
+            if name not in sources:
+                continue  # an argument added later, at the value that changes nothing
+        else:
+            if value is None and name in recorded_as:
+                value = recorded_as[name]
+            defaults[name] = _plain(value)
         for token in re.findall(r"[A-Za-z_][A-Za-z0-9_]*", str(parameter.annotation)):
             config = module.get(token)
             if isinstance(config, type) and dataclasses.is_dataclass(config):
@@ -91,7 +104,49 @@ def class_defaults(
                         defaults[key] = _config_defaults(config, None, neutral)
                     except TypeError:
                         continue
+    _recorded_layout(defaults, moved, neutral.get("fixed_settings", {}).get(name_of, {}), neutral, name_of)
     return defaults
+
+
+def _recorded_layout(
+    defaults: dict[str, Any], moved: dict[str, str], fixed: dict[str, Any], neutral: Rules, name_of: str
+) -> None:
+    """Put the settings that moved since runs were recorded back where those runs' digests hold them, in place.
+
+    :param defaults: ``class_defaults``'s result so far.
+    :param moved: ``{"argument.field": "old place"}``, the old place an argument (``"loss"``) or an ``"argument.field"``
+        (``"online.hard_negatives"``) (``moved_settings``).
+    :param fixed: ``{"argument.field": value}``, settings the agent no longer has, at the value its behaviour is now
+        fixed at (``fixed_settings``).
+    :param neutral: the rules: an old place's neutral value leaves it out, as it did then.
+    :param name_of: the agent class's name.
+    """
+
+    def config_key(argument: str) -> str | None:
+        return next((key for key in defaults if key.startswith(f"{argument}:")), None)
+
+    def place(path: str, value: Any) -> None:
+        argument, _, field = path.partition(".")
+        if not field:
+            if _plain(value) != _plain(neutral.get("arguments", {}).get(name_of, {}).get(argument, object())):
+                defaults[argument] = _plain(value)
+            return
+        key = config_key(argument)
+        assert key is not None, f"no config argument {argument!r} to put {path!r} back into"
+        rules = neutral.get("config_fields", {}).get(key.split(":")[1], {})
+        if not (field in rules and rules[field] == value):
+            defaults[key][field] = value
+
+    for new, old in moved.items():
+        argument, _, field = new.partition(".")
+        key = config_key(argument)
+        if key is None or field not in defaults[key]:
+            continue
+        place(old, defaults[key].pop(field))
+        if not defaults[key]:
+            del defaults[key]
+    for path, value in fixed.items():
+        place(path, value)
 
 
 Rules = dict[str, dict[str, dict[str, Any]]]
@@ -105,6 +160,33 @@ def _config_defaults(config: type, fields: dict[str, Any] | None, neutral: Rules
         if name in values and values[name] == value:
             del values[name]
     return values
+
+
+def recorded_hyperparams(class_name: str | None, hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """A job's agent keyword arguments in the layout the recorded runs were fingerprinted in (``moved_settings``):
+    ``{"training": {"l2_coeff": 0.1, "hard_negatives": True}}`` reads ``{"l2_coeff": 0.1, "online": {"hard_negatives":
+    True}}``, so that a row written in today's layout is the run recorded before the configs were split.
+
+    :param class_name: the agent's class name (None: an agent without such rules, returned as is).
+    :param hyperparams: the job's ``hyperparams``.
+    :return: a new dict.
+    """
+    moved = neutral_settings()["moved_settings"].get(class_name or "", {})
+    result = {key: dict(value) if isinstance(value, dict) else value for key, value in hyperparams.items()}
+    for new, old in moved.items():
+        argument, _, field = new.partition(".")
+        given = result.get(argument)
+        if not isinstance(given, dict) or field not in given:
+            continue
+        value = given.pop(field)
+        if not given:
+            del result[argument]
+        old_argument, _, old_field = old.partition(".")
+        if old_field:
+            result.setdefault(old_argument, {})[old_field] = value
+        else:
+            result[old_argument] = value
+    return result
 
 
 def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
@@ -137,4 +219,11 @@ def env_inverse_dynamics_defaults(env_id: str) -> dict[str, Any]:
     }
 
 
-__all__ = ["NEUTRAL_FILE", "NOT_MEASURED", "class_defaults", "env_inverse_dynamics_defaults", "neutral_settings"]
+__all__ = [
+    "NEUTRAL_FILE",
+    "NOT_MEASURED",
+    "class_defaults",
+    "env_inverse_dynamics_defaults",
+    "neutral_settings",
+    "recorded_hyperparams",
+]

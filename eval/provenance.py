@@ -22,6 +22,7 @@ from typing import Any
 
 import torch
 
+from eval.digest import recorded_hyperparams
 from eval.jobs import Job, JobResult, to_plain
 from eval.registry import AGENTS
 
@@ -35,12 +36,16 @@ SESSIONS_FILE = "sessions.jsonl"
 
 def job_fingerprint(job: Job) -> str:
     """A short hash of what the job measures: every field except ``NOT_FINGERPRINTED``, and only fields that differ
-    from their default (so adding a field with a default later keeps old runs valid).
+    from their default (so adding a field with a default later keeps old runs valid); the hyperparams in the layout
+    the recorded runs had (``eval.digest.recorded_hyperparams``), so that moving a setting keeps them valid too.
 
     :param job: the job.
     :return: 16 hex digits.
     """
     config = to_plain(asdict(job))
+    agent_spec = AGENTS.get(job.agent)
+    class_name = agent_spec.class_name if agent_spec else None
+    config["hyperparams"] = to_plain(recorded_hyperparams(class_name, job.hyperparams))
     kept = {}
     for spec in fields(Job):
         if spec.name in NOT_FINGERPRINTED:

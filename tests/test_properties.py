@@ -19,7 +19,17 @@ from hypothesis.extra import numpy as hnp
 
 import envs  # noqa: F401  (registers the ids)
 from baselines.action_ff import ActionFFAgent
-from ebm_agent import EBMPlannerAgent, EnergyConfig, EnergyModel, GaussianGoalEnergy, MPPIConfig, MPPIPlanner, OnlineConfig
+from ebm_agent import (
+    EBMPlannerAgent,
+    EnergyConfig,
+    EnergyModel,
+    GaussianGoalEnergy,
+    MPPIConfig,
+    MPPIPlanner,
+    OnlineConfig,
+    TrainingConfig,
+)
+from ebm_agent.config import MOVED_FIELDS, REMOVED_FIELDS
 from ebm_agent.costs import PlanCost
 
 FAST = settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -179,9 +189,15 @@ BAD_VALUES: dict[type, dict[str, st.SearchStrategy]] = {
     OnlineConfig: {
         "deviation_threshold": st.one_of(st.floats(max_value=0.0, exclude_max=True), st.just(float("nan"))),
         "replan_threshold": st.floats(max_value=0.0, exclude_max=True),
-        "neg_replay_prob": st.one_of(st.floats(min_value=1.0, exclude_min=True), st.floats(max_value=0.0, exclude_max=True)),
+        "random_action_prob": st.one_of(
+            st.floats(min_value=1.0, exclude_min=True), st.floats(max_value=0.0, exclude_max=True)
+        ),
         "pos_buffer_size": st.integers(max_value=0),
+    },
+    TrainingConfig: {
+        "neg_replay_prob": st.one_of(st.floats(min_value=1.0, exclude_min=True), st.floats(max_value=0.0, exclude_max=True)),
         "neg_buffer_size": st.integers(max_value=0),
+        "l2_anneal_end": st.floats(min_value=1.0, exclude_min=True, allow_nan=False, allow_infinity=False),
     },
     MPPIConfig: {
         "num_samples": st.one_of(st.integers(max_value=0), st.booleans()),
@@ -195,7 +211,7 @@ BAD_VALUES: dict[type, dict[str, st.SearchStrategy]] = {
         "activation": st.text(max_size=8).filter(lambda s: s not in {"leaky_relu", "relu", "swish", "silu", "tanh"}),
     },
 }
-AGENT_ARGUMENT = {OnlineConfig: "online", MPPIConfig: "planner_config", EnergyConfig: "energy"}
+AGENT_ARGUMENT = {OnlineConfig: "online", TrainingConfig: "training", MPPIConfig: "planner_config", EnergyConfig: "energy"}
 
 
 @st.composite
@@ -220,17 +236,24 @@ def test_out_of_range_config_values_are_rejected_at_construction(case):
 
 
 @FAST
-@given(key=st.text(min_size=1, max_size=10), argument=st.sampled_from(["online", "planner_config", "energy", "cost"]))
+@given(
+    key=st.text(min_size=1, max_size=10),
+    argument=st.sampled_from(["online", "training", "planner_config", "energy", "cost"]),
+)
 def test_unknown_config_keys_are_rejected_with_the_valid_ones(key, argument):
-    valid = {"online": OnlineConfig, "planner_config": MPPIConfig, "energy": EnergyConfig}.get(argument)
-    if valid is not None and key in valid.__dataclass_fields__:
+    valid = {"online": OnlineConfig, "training": TrainingConfig, "planner_config": MPPIConfig, "energy": EnergyConfig}
+    config = valid.get(argument)
+    if config is not None and key in config.__dataclass_fields__:
         return
+    if argument == "online" and (key in MOVED_FIELDS["OnlineConfig"] or key in REMOVED_FIELDS["OnlineConfig"]):
+        return  # those get an error naming where the setting went
     if argument == "cost" and key in (
         "goal_energy",
         "goal_weight",
         "eval_goal_weight",
         "velocity_weight",
         "acceleration_weight",
+        "warmup_plans",
     ):
         return
     with pytest.raises(TypeError, match="valid keys"):

@@ -101,7 +101,8 @@ RESUME_SETTINGS = {
     "reliability": {
         "horizon": 3,
         "planner_config": {"num_samples": 8, "iterations": 2},
-        "online": {"pos_buffer_size": 1_000, "neg_buffer_size": 500},
+        "online": {"pos_buffer_size": 1_000},
+        "training": {"neg_buffer_size": 500},
         "image_log_interval": 0,
     },
 }

@@ -1,4 +1,4 @@
-"""Hard negatives from failed plan steps (issue #34, ``OnlineConfig.hard_negatives``, off by default): labelling,
+"""Hard negatives from failed plan steps (issue #34, ``TrainingConfig.hard_negatives``, off by default): labelling,
 the ranking term, the option's wiring into the online loss and its checkpoint."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import envs  # noqa: F401
 from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
 from ebm_agent.base import Segment
-from ebm_agent.config import OnlineConfig
+from ebm_agent.config import TrainingConfig
 from ebm_agent.losses import ContrastBatch, contrastive_divergence_loss, hard_negative_margin_loss
 
 SMALL = {
@@ -24,9 +24,11 @@ SMALL = {
 """A cheap agent: these tests check the wiring, not the planning."""
 
 
-def _agent(online: dict | None = None, **kwargs) -> EBMPlannerAgent:
+def _agent(training: dict | None = None, **kwargs) -> EBMPlannerAgent:
+    """An agent with ``training`` (its ``TrainingConfig``), ``loss`` and ``l2_coeff`` among them."""
     torch.set_num_threads(1)
-    return EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, online=online, **SMALL, **kwargs)
+    training = {**(training or {}), **{key: kwargs.pop(key) for key in ("loss", "l2_coeff") if key in kwargs}}
+    return EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, training=training, **SMALL, **kwargs)
 
 
 def _segment(states: np.ndarray, planned_next: np.ndarray, real_next: np.ndarray) -> Segment:
@@ -48,13 +50,13 @@ def _segment(states: np.ndarray, planned_next: np.ndarray, real_next: np.ndarray
 )
 def test_bad_hard_negative_settings_are_refused(bad: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        OnlineConfig(**bad)
+        TrainingConfig(**bad)
 
 
 def test_off_by_default_and_refused_by_action_ff() -> None:
-    assert OnlineConfig().hard_negatives is False
+    assert TrainingConfig().hard_negatives is False
     assert _agent().hard_negative_buffer is None
-    with pytest.raises(ValueError, match="hard_negatives"):
+    with pytest.raises(TypeError, match=r"online\.hard_negatives moved to training\.hard_negatives"):
         ActionFFAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), online={"hard_negatives": True}, device="cpu")
     with pytest.raises(ValueError, match="loss='cd'"):
         _agent({"hard_negatives": True}, loss="infonce")
@@ -116,7 +118,7 @@ def test_learning_with_hard_negatives_trains_on_failed_steps(loss: str, tmp_path
     assert all(torch.isfinite(p).all() for p in agent.energy_model.parameters())
     path = agent.save_checkpoint(tmp_path / "checkpoint")
     loaded = EBMPlannerAgent.load_checkpoint(path, env=gym.make("ebm/Maze-v0"), device="cpu")
-    assert loaded.online.hard_negatives and len(loaded.hard_negative_buffer) == len(agent.hard_negative_buffer)
+    assert loaded.training.hard_negatives and len(loaded.hard_negative_buffer) == len(agent.hard_negative_buffer)
     np.testing.assert_array_equal(
         loaded.hard_negative_buffer.get(np.arange(3)).next_states, agent.hard_negative_buffer.get(np.arange(3)).next_states
     )
@@ -166,7 +168,26 @@ def test_negatives_mode_at_weight_one_is_cd_over_the_joined_negatives() -> None:
         as_tensor(states),
         hard=(as_tensor(hard.states), as_tensor(hard.next_states), as_tensor(hard.actions)),
     )
-    loss, stats = agent.loss_fn(energy, batch, agent.l2_coeff)
+    loss, stats = agent.loss_fn(energy, batch, agent.training.l2_coeff)
     joined = torch.cat([energy_neg, energy(torch.as_tensor(hard.states), torch.as_tensor(hard.next_states))])  # [10]
     expected, _ = contrastive_divergence_loss(energy_pos, joined, l2_coeff=0.5)
     assert torch.isclose(loss, expected, atol=1e-6) and stats["num_failed"] == 5.0
+
+
+def test_a_model_saved_before_the_configs_were_split_loads_into_them(tmp_path) -> None:
+    agent = _agent()
+    # the layout of a model saved before issue 45: training settings as attributes and inside online
+    del agent.training
+    agent.__dict__.update(loss="cd", l2_coeff=0.3, reach_candidates=64, perturbed_negatives=0, perturb_scales=(1.0,))
+    agent.online.hard_negatives = True  # type: ignore[attr-defined]
+    agent.online.l2_final = 0.1  # type: ignore[attr-defined]
+    agent.online.prior_warmup_plans = 50  # type: ignore[attr-defined]
+    agent.save(tmp_path / "old.zip")
+    loaded = EBMPlannerAgent.load(tmp_path / "old.zip", env=gym.make("ebm/Maze-v0"), device="cpu")
+    assert loaded.training == TrainingConfig(l2_coeff=0.3, perturb_scales=(1.0,), hard_negatives=True, l2_final=0.1)
+    assert loaded.cost_config.warmup_plans == 50 and loaded.hard_negative_buffer is not None
+    assert "hard_negatives" not in vars(loaded.online) and "l2_coeff" not in vars(loaded)
+    # a fresh save holds today's layout and loads as it was
+    loaded.save(tmp_path / "new.zip")
+    again = EBMPlannerAgent.load(tmp_path / "new.zip", env=gym.make("ebm/Maze-v0"), device="cpu")
+    assert again.training == loaded.training and again.cost_config.warmup_plans == 50

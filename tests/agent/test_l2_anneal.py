@@ -1,4 +1,4 @@
-"""The annealed L2 term (``OnlineConfig.l2_final``): validation, the schedule, and its wiring into ``learn``."""
+"""The annealed L2 term (``TrainingConfig.l2_final``): validation, the schedule, and its wiring into ``learn``."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ import torch
 import envs  # noqa: F401
 from baselines.action_ff import ActionFFAgent
 from ebm_agent import EBMPlannerAgent
-from ebm_agent.config import OnlineConfig
+from ebm_agent.config import TrainingConfig
 
 SMALL = {
     "planner_config": {"num_samples": 8, "iterations": 1},
@@ -22,9 +22,11 @@ SMALL = {
 """A cheap agent: these tests check the schedule, not the planning."""
 
 
-def _agent(online: dict | None = None, **kwargs) -> EBMPlannerAgent:
+def _agent(training: dict | None = None, **kwargs) -> EBMPlannerAgent:
+    """An agent with ``training`` (its ``TrainingConfig``), ``loss`` and ``l2_coeff`` among them."""
     torch.set_num_threads(1)
-    return EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, online=online, **SMALL, **kwargs)
+    training = {**(training or {}), **{key: kwargs.pop(key) for key in ("loss", "l2_coeff") if key in kwargs}}
+    return EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=0, training=training, **SMALL, **kwargs)
 
 
 @pytest.mark.parametrize(
@@ -38,12 +40,12 @@ def _agent(online: dict | None = None, **kwargs) -> EBMPlannerAgent:
 )
 def test_bad_anneal_settings_are_refused(bad: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
-        OnlineConfig(**bad)
+        TrainingConfig(**bad)
 
 
 def test_off_by_default_and_refused_by_action_ff() -> None:
-    assert OnlineConfig().l2_final is None
-    with pytest.raises(ValueError, match="l2_final"):
+    assert TrainingConfig().l2_final is None
+    with pytest.raises(TypeError, match=r"online\.l2_final moved to training\.l2_final"):
         ActionFFAgent("MultiInputPolicy", gym.make("ebm/Maze-v0"), online={"l2_final": 0.1}, device="cpu")
 
 
@@ -75,7 +77,7 @@ def _record_l2(agent: EBMPlannerAgent, seen: list[tuple[int, float]]) -> None:
     step = agent._gradient_step
 
     def spy(*args, l2_coeff=None, **kwargs):
-        seen.append((agent.num_timesteps, agent.l2_coeff if l2_coeff is None else l2_coeff))
+        seen.append((agent.num_timesteps, agent.training.l2_coeff if l2_coeff is None else l2_coeff))
         return step(*args, l2_coeff=l2_coeff, **kwargs)
 
     agent._gradient_step = spy  # type: ignore[method-assign]

@@ -213,7 +213,7 @@ def test_the_agent_builds_its_loss_once_from_its_settings() -> None:
         assert isinstance(loss, cls) and loss.contrast == contrast, name
     with pytest.raises(ValueError, match="loss must be one of"):
         make_loss("hinge")
-    agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), loss="infonce_reach", device="cpu")
+    agent = EBMPlannerAgent("MultiInputPolicy", gym.make("ebm/Particle-v0"), training={"loss": "infonce_reach"}, device="cpu")
     assert isinstance(agent.loss_fn, ConditionalInfoNCE) and agent.loss_fn.contrast == "reach"
 
 

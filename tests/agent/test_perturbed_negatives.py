@@ -13,8 +13,10 @@ from ebm_agent import EBMPlannerAgent, collect_random_transitions
 
 
 def make_agent(**kwargs: object) -> EBMPlannerAgent:
+    """A Reacher agent; ``loss``, ``perturbed_negatives`` and ``perturb_scales`` go to its ``training``."""
+    training = {key: kwargs.pop(key) for key in ("loss", "perturbed_negatives", "perturb_scales") if key in kwargs}
     return EBMPlannerAgent(
-        "MultiInputPolicy", gym.make("ebm/Reacher-v0"), seed=0, image_log_interval=0, device="cpu", **kwargs
+        "MultiInputPolicy", gym.make("ebm/Reacher-v0"), seed=0, image_log_interval=0, device="cpu", training=training, **kwargs
     )
 
 
@@ -40,7 +42,7 @@ def test_perturbed_next_states_follow_the_real_moves_scale() -> None:
 
 
 def test_options_are_validated_and_off_by_default() -> None:
-    assert make_agent().perturbed_negatives == 0
+    assert make_agent().training.perturbed_negatives == 0
     with pytest.raises(ValueError, match="perturbed_negatives"):
         make_agent(perturbed_negatives=-1)
     with pytest.raises(ValueError, match="perturb_scales"):

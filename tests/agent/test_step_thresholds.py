@@ -150,7 +150,8 @@ def test_failed_steps_scale_with_the_env(units: str, expected: tuple[int, int]) 
     failed = []
     for scale in (1.0, 10.0):
         threshold = 0.2 if units == "step" else 0.01  # a fifth of the maze's step, in either unit
-        agent = _agent(scale, {"threshold_units": units, "hard_negatives": True, "hard_negative_threshold": threshold})
+        training = {"hard_negatives": True, "hard_negative_threshold": threshold}
+        agent = _agent(scale, {"threshold_units": units}, training=training)
         states, real_next = _real_moves(scale)
         # misses of 0.1, 0.3 and 0.5 maze steps (0.005, 0.015, 0.025 in its units) in x
         planned_next = real_next + np.array([[0.005], [0.015], [0.025]], dtype=np.float32) * np.array([[scale, 0.0]])

@@ -66,7 +66,12 @@ def test_energy_config_rejects_bad_fourier_settings(bad: dict[str, float]) -> No
 def test_reach_infonce_trains_offline_and_online() -> None:
     env = gym.make("ebm/Maze-v0")
     agent = EBMPlannerAgent(
-        "MultiInputPolicy", env, seed=0, image_log_interval=0, device="cpu", loss="infonce_reach", reach_candidates=8
+        "MultiInputPolicy",
+        env,
+        seed=0,
+        image_log_interval=0,
+        device="cpu",
+        training={"loss": "infonce_reach", "reach_candidates": 8},
     )
     data = collect_random_transitions(gym.make("ebm/Maze-v0"), 300, seed=0)
     agent.learn_offline(data, epochs=1, log_interval=0)
@@ -76,7 +81,7 @@ def test_reach_infonce_trains_offline_and_online() -> None:
     agent.learn(total_timesteps=30)
     assert all(torch.isfinite(p).all() for p in agent.energy_model.parameters())
     with pytest.raises(ValueError, match="reach_candidates"):
-        EBMPlannerAgent("MultiInputPolicy", env, reach_candidates=0)
+        EBMPlannerAgent("MultiInputPolicy", env, training={"reach_candidates": 0})
 
 
 def near_wall_auroc(energy: dict[str, object] | None, seed: int) -> float:
@@ -84,7 +89,13 @@ def near_wall_auroc(energy: dict[str, object] | None, seed: int) -> float:
     env = gym.make("ebm/Maze-v0", start=(-0.6, -0.5), max_episode_steps=30)
     data = collect_random_transitions(env, 3000, seed=seed)
     agent = EBMPlannerAgent(
-        "MultiInputPolicy", gym.make("ebm/Maze-v0"), seed=seed, image_log_interval=0, device="cpu", l2_coeff=0.1, energy=energy
+        "MultiInputPolicy",
+        gym.make("ebm/Maze-v0"),
+        seed=seed,
+        image_log_interval=0,
+        device="cpu",
+        training={"l2_coeff": 0.1},
+        energy=energy,
     )
     agent.learn_offline(data, epochs=10, log_interval=0)
     return feasibility_auroc(agent, env, n_moves=4000, near=data.states, seed=seed).auroc

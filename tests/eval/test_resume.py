@@ -15,10 +15,14 @@ from eval.run import run_job
 
 pytest.importorskip("envs.particle")
 
+EBM_ONLY = ("image_log_interval", "training")
+"""FAST's settings Action FF does not take."""
+
 FAST = {
     "horizon": 3,
     "planner_config": {"num_samples": 8, "iterations": 2},
-    "online": {"pos_buffer_size": 1_000, "neg_buffer_size": 500},
+    "online": {"pos_buffer_size": 1_000},
+    "training": {"neg_buffer_size": 500},
     "image_log_interval": 0,
 }
 
@@ -31,7 +35,7 @@ def _job(out_dir, agent: str = "ebm", **overrides) -> Job:
         "timesteps": 300,
         "eval_freq": 110,  # not a multiple of the horizon: the checkpoint falls mid-plan
         "eval_episodes": 2,
-        "hyperparams": FAST if agent == "ebm" else {k: v for k, v in FAST.items() if k != "image_log_interval"},
+        "hyperparams": FAST if agent == "ebm" else {k: v for k, v in FAST.items() if k not in EBM_ONLY},
         "device": "cpu",
         "out_dir": str(out_dir),
     }
