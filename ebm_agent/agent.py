@@ -285,12 +285,6 @@ class EBMPlannerAgent(PlannerAgentBase):
         assert isinstance(model, EnergyModel)
         return model
 
-    has_energy = True
-
-    def _subgoal_energy(self) -> EnergyModel:
-        """The learned energy, handed to the subgoal builder (its graph's edges)."""
-        return self.energy_model
-
     def _excluded_save_params(self) -> list[str]:
         return [
             *super()._excluded_save_params(),

@@ -221,7 +221,8 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
     ) -> None:
         graph_config = subgoal_settings(subgoal_class, subgoal_graph)
         explore_config = long_horizon_configs(None, explore)[1]
-        check_long_horizon(graph_config, explore_config, subgoal_class, self.has_energy, type(self).__name__)
+        has_energy = hasattr(type(self), "energy_model")  # the class's: the model is built later
+        check_long_horizon(graph_config, explore_config, subgoal_class, has_energy, type(self).__name__)
         if isinstance(policy, str) and policy not in self.policy_aliases:
             raise ValueError(
                 f"{type(self).__name__} takes policy 'MultiInputPolicy' (its networks plan over the Dict observation "
@@ -803,16 +804,10 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         self.subgoals = self._make_subgoals(states, next_states)
         return self.subgoals
 
-    has_energy: bool = False
-    """Whether the agent has a learned energy over transitions (``energy_model``) that subgoal graphs may read."""
-
-    def _subgoal_energy(self) -> Any:
-        """The learned energy E(s [..., D], s' [..., D]) -> [...] handed to the subgoal builder (None: none)."""
-        return None
-
     def _make_subgoals(self, states: np.ndarray, next_states: np.ndarray) -> Any:
         """``subgoal_class.from_transitions`` over real transitions, from what the agent learned: its goal dims,
-        horizon (the default lookahead), energy and state periods, never the agent itself."""
+        horizon (the default lookahead), energy (``energy_model``, None for an agent without one) and state periods,
+        never the agent itself."""
         assert self.goal_spec is not None
         settings = self.subgoal_graph
         kwargs = {} if settings is None else settings.kwargs() if isinstance(settings, SubgoalGraphConfig) else dict(settings)
@@ -824,7 +819,7 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
             states,
             np.asarray(next_states, dtype=np.float32),
             goal_indices=list(self.goal_spec.goal_indices),
-            energy=self._subgoal_energy(),
+            energy=getattr(self, "energy_model", None),
             period=state_periods(self.goal_spec, states.shape[1]),
             **kwargs,
         )

@@ -56,11 +56,16 @@ TRAINING_FROM_ONLINE: tuple[str, ...] = (
 TRAINING_FROM_ARGUMENTS: tuple[str, ...] = ("loss", "l2_coeff", "reach_candidates", "perturbed_negatives", "perturb_scales")
 """The EBM constructor's arguments that issue 45 moved to :class:`TrainingConfig`."""
 
+MOVED_SETTINGS: dict[str, str] = {
+    **{f"training.{name}": name for name in TRAINING_FROM_ARGUMENTS},
+    **{f"training.{name}": f"online.{name}" for name in TRAINING_FROM_ONLINE},
+    "cost.warmup_plans": "online.prior_warmup_plans",
+}
+"""The EBM agent's settings that issue 45 moved: ``"argument.field"`` today -> where it was (``"argument"`` or
+``"argument.field"``). The harness reads it to keep the digests of runs recorded before the move (eval/digest.py)."""
+
 MOVED_FIELDS: dict[str, dict[str, str]] = {
-    "OnlineConfig": {
-        **{name: f"training.{name}" for name in TRAINING_FROM_ONLINE},
-        "prior_warmup_plans": "cost.warmup_plans",
-    },
+    "OnlineConfig": {old.split(".")[1]: new for new, old in MOVED_SETTINGS.items() if old.startswith("online.")}
 }
 """Config fields moved to another config: config class name -> {field: its new place}, for the error an old setting
 gets."""

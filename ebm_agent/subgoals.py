@@ -693,12 +693,7 @@ def _check_graph_settings(quantile: Any, cell: Any, edges: Any, energy: Any, aim
         raise ValueError(f"quantile must be in (0, 1], got {quantile!r}.")
     if not 0.0 < cell <= 1.0:
         raise ValueError(f"cell must be in (0, 1] (a fraction of one real step), got {cell!r}.")
-    check_edges(edges)
-    if edges in ("energy", "both") and energy is None:
-        raise ValueError(
-            f"edges={edges!r} needs a learned energy (energy=E(s, s')), got none; use edges='real' (a graph of the "
-            "moves made)."
-        )
+    check_edges(edges, energy is not None, "the builder (energy=None)")
     if aim not in AIMS:
         raise ValueError(f"aim must be one of {AIMS}, got {aim!r}.")
     if isinstance(real_hops, bool) or not isinstance(real_hops, int) or real_hops < 1:

@@ -2,7 +2,8 @@
 
 Every finished run stores the digest of its agent's settings on its env (``AgentSpec.defaults``); a run whose digest
 differs from today's is no longer current. The library knows nothing of this: which settings were added at a value
-that changes nothing (and so must not retire the runs made before them) is harness data, ``neutral_settings.yaml``.
+that changes nothing (and so must not retire the runs made before them) is harness data, ``neutral_settings.yaml``;
+where the library moved a setting is the library's own record (``ebm_agent.config.MOVED_SETTINGS``), read here.
 """
 
 from __future__ import annotations
@@ -19,6 +20,8 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
+from ebm_agent.config import MOVED_SETTINGS
+
 NEUTRAL_FILE = Path(__file__).with_name("neutral_settings.yaml")
 """The settings added after runs were recorded, with the values at which they change nothing."""
 
@@ -32,6 +35,8 @@ def neutral_settings() -> dict[str, dict[str, dict[str, Any]]]:
     ``removed_fields``, ``moved_settings``, ``fixed_settings``, ``arguments``, ``recorded_as``,
     ``env_inverse_dynamics``)."""
     data = yaml.safe_load(NEUTRAL_FILE.read_text()) or {}
+    # where the library moved its settings is its own record (the error an old setting gets names the same places)
+    data["moved_settings"] = {"EBMPlannerAgent": dict(MOVED_SETTINGS), **(data.get("moved_settings") or {})}
     sections = (
         "config_fields",
         "removed_fields",

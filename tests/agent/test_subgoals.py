@@ -544,7 +544,7 @@ def test_the_graph_is_built_from_an_energy_function_not_from_an_agent():
     graph = GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=10, energy=WallEnergy())
     start, goal = np.array([[-0.6, -0.6]], np.float32), np.array([[0.6, -0.6]], np.float32)
     assert graph.subgoals(start, goal)[0, 1] > -0.6 + 0.1  # the path climbs round the wall's end at y = 0.5
-    with pytest.raises(ValueError, match=r"edges='energy' needs a learned energy \(energy=E\(s, s'\)\), got none"):
+    with pytest.raises(ValueError, match=r"edges='energy' needs a learned energy, and the builder \(energy=None\) has none"):
         GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=10)
     with pytest.raises(ValueError, match="lookahead must be a positive int"):
         GraphSubgoals.from_transitions(states, following, goal_indices=[0, 1], lookahead=0, edges="real")
