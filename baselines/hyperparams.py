@@ -17,7 +17,7 @@ import torch.nn as nn
 import yaml
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import LinearSchedule
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
 
 from envs import resolve_env_id
 
@@ -135,14 +135,106 @@ def training_env(
     return env
 
 
+def normalize_kwargs(setting: Any, gamma: float | None = None) -> dict[str, Any] | None:
+    """rl-zoo3's ``normalize`` entry as ``VecNormalize`` keyword arguments.
+
+    :param setting: ``False`` / None (no normalisation), ``True`` (``VecNormalize``'s defaults, observations and
+        rewards, as rl-zoo3's ``normalize: true``) or a dict of ``VecNormalize`` keyword arguments (``norm_obs``,
+        ``norm_reward``, ``clip_obs``, ...).
+    :param gamma: the algorithm's discount; like rl-zoo3 it becomes the reward normaliser's ``gamma`` unless the dict
+        sets one.
+    :return: the keyword arguments, or None for no normalisation.
+    :raises ValueError: for another value or an unknown key.
+    """
+    if setting is None or setting is False:
+        return None
+    if setting is True:
+        setting = {}
+    if not isinstance(setting, dict):
+        raise ValueError(
+            f"normalize={setting!r}: use true, false or a dict of VecNormalize arguments, e.g. "
+            "{norm_obs: true, norm_reward: false}."
+        )
+    unknown = sorted(set(setting) - _VEC_NORMALIZE_KEYS)
+    if unknown:
+        raise ValueError(f"normalize: unknown VecNormalize argument(s) {unknown}; it takes {sorted(_VEC_NORMALIZE_KEYS)}.")
+    kwargs = dict(setting)
+    if gamma is not None:
+        kwargs.setdefault("gamma", float(gamma))
+    return kwargs
+
+
+_VEC_NORMALIZE_KEYS = frozenset({"norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon", "norm_obs_keys"})
+"""The ``VecNormalize`` arguments a table's ``normalize`` dict may set (its ``venv`` and ``training`` are not settings)."""
+
+
+def normalized(env: gym.Env | VecEnv, kwargs: dict[str, Any] | None) -> gym.Env | VecEnv:
+    """The training env wrapped in ``VecNormalize`` with ``kwargs`` (as is for None).
+
+    The statistics are part of the model: SB3 stores the raw observations in its buffers and normalises them when it
+    samples, and ``model.get_vec_normalize_env()`` returns the wrapper, which :func:`normalized_like` copies onto an
+    evaluation env.
+
+    :param env: an env or VecEnv.
+    :param kwargs: from :func:`normalize_kwargs`.
+    :return: the env to train on.
+    """
+    if kwargs is None:
+        return env
+    vec_env = env if isinstance(env, VecEnv) else DummyVecEnv([lambda: env])
+    return VecNormalize(vec_env, **kwargs)
+
+
+def vec_normalize_of(model: Any) -> VecNormalize | None:
+    """The ``VecNormalize`` wrapper a model trains on (SB3's ``get_vec_normalize_env``), or None for a model without one
+    or an agent without that method (this project's planners).
+
+    :param model: an SB3-style model.
+    :return: the wrapper or None.
+    """
+    getter = getattr(model, "get_vec_normalize_env", None)
+    return getter() if callable(getter) else None
+
+
+def normalized_like(model: Any, env: VecEnv) -> VecEnv:
+    """An evaluation env that sees what ``model`` was trained on: wrapped in a frozen ``VecNormalize`` that shares the
+    model's observation statistics, when the model has one; else ``env`` itself.
+
+    Rewards stay raw (``norm_reward=False``), so scores are in the env's units; the statistics object is shared, so
+    evaluations during training see the current statistics (SB3's ``EvalCallback`` also syncs them).
+
+    :param model: an SB3 model (anything with ``get_vec_normalize_env``; others pass through).
+    :param env: the evaluation VecEnv.
+    :return: the env to evaluate on.
+    """
+    normalizer = vec_normalize_of(model)
+    if normalizer is None:
+        return env
+    wrapped = VecNormalize(
+        env,
+        training=False,
+        norm_obs=normalizer.norm_obs,
+        norm_reward=False,
+        clip_obs=normalizer.clip_obs,
+        epsilon=normalizer.epsilon,
+        norm_obs_keys=normalizer.norm_obs_keys,
+    )
+    wrapped.obs_rms = normalizer.obs_rms
+    return wrapped
+
+
 __all__ = [
     "PPO_HYPERPARAMS",
     "PPO_HYPERPARAMS_FILE",
     "TABLE_DIR",
     "env_id_of",
     "load_table",
+    "normalize_kwargs",
+    "normalized",
+    "normalized_like",
     "policy_kwargs",
     "schedule",
     "table_entry",
     "training_env",
+    "vec_normalize_of",
 ]

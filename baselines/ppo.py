@@ -1,7 +1,8 @@
 """PPO baseline: Stable-Baselines3's PPO with the per-env tuned hyperparameters of :mod:`baselines.hyperparams`.
 
-``make_ppo("particle", seed=0).learn(50_000, callback=exact_budget_callback(50_000))`` is the whole recipe. No
-``VecNormalize`` is used: the harness evaluates every agent on the raw observations of the same env.
+``make_ppo("particle", seed=0).learn(50_000, callback=exact_budget_callback(50_000))`` is the whole recipe. An
+entry's ``normalize`` (rl-zoo3's key) wraps the training env in ``VecNormalize``, whose statistics the harness copies
+onto its raw evaluation env (``baselines.hyperparams.normalized_like``).
 
 Step accounting: SB3 counts ``num_timesteps`` in transitions (``n_envs`` per vectorised step) and only checks the
 budget between rollouts of ``n_envs * n_steps`` transitions, so ``learn(total)`` overshoots unless ``total`` is a
@@ -21,14 +22,24 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.vec_env import VecEnv
 
-from baselines.hyperparams import PPO_HYPERPARAMS, env_id_of, policy_kwargs, schedule, table_entry, training_env
+from baselines.hyperparams import (
+    PPO_HYPERPARAMS,
+    env_id_of,
+    normalize_kwargs,
+    normalized,
+    policy_kwargs,
+    schedule,
+    table_entry,
+    training_env,
+)
 
 # Arguments make_ppo sets itself; everything else in PPO's constructor may come from the table or an override.
 _OWN_ARGUMENTS = {"self", "policy", "env", "seed", "tensorboard_log", "verbose", "device", "_init_setup_model"}
 VALID_HYPERPARAMS: frozenset[str] = frozenset(
-    {"n_envs", "policy"} | (set(inspect.signature(PPO.__init__).parameters) - _OWN_ARGUMENTS)
+    {"n_envs", "policy", "normalize"} | (set(inspect.signature(PPO.__init__).parameters) - _OWN_ARGUMENTS)
 )
-"""Keys a table entry or a ``make_ppo`` override may set: ``n_envs``, ``policy`` and PPO's constructor arguments."""
+"""Keys a table entry or a ``make_ppo`` override may set: ``n_envs``, ``policy``, ``normalize`` (rl-zoo3's: true,
+false or ``VecNormalize`` arguments) and PPO's constructor arguments."""
 
 
 def ppo_hyperparams(env_id: str) -> dict[str, Any]:
@@ -82,7 +93,8 @@ def make_ppo(
         if isinstance(params.get(key), str):
             params[key] = schedule(key, params[key])
     params["policy_kwargs"] = policy_kwargs(params.get("policy_kwargs") or {})
-    vec_env = training_env(env, n_envs, seed, env_kwargs, "the tuned PPO settings")
+    normalization = normalize_kwargs(params.pop("normalize", False), params.get("gamma", 0.99))
+    vec_env = normalized(training_env(env, n_envs, seed, env_kwargs, "the tuned PPO settings"), normalization)
 
     policy = params.pop("policy", None) or _default_policy(vec_env.observation_space)
     return PPO(policy, vec_env, seed=seed, tensorboard_log=tensorboard_log, verbose=verbose, device=device, **params)

@@ -1,8 +1,10 @@
 """SAC + HER baseline: Stable-Baselines3's SAC with ``HerReplayBuffer`` (goal relabelling) on the GoalEnv dicts.
 
 ``make_sac_her("particle", seed=0).learn(20_000)`` is the whole recipe; the per-env hyperparameters are data,
-``baselines/sac_her.yaml`` (rl-zoo3 style, a ``default`` entry; its comments say where each value comes from). No
-``VecNormalize`` is used: the harness evaluates every agent on the raw observations of the same env.
+``baselines/sac_her.yaml`` (rl-zoo3 style, a ``default`` entry; its comments say where each value comes from). An
+entry's ``normalize`` (rl-zoo3's key; the Fetch entries set it, as rl-zoo3 does) wraps the training env in
+``VecNormalize``; the statistics belong to the model (``model.get_vec_normalize_env()``), and the harness evaluates
+through a frozen copy of them (``baselines.hyperparams.normalized_like``) on the same raw env as every other agent.
 
 HER relabels a stored transition with a goal achieved later in its episode (``future``) and asks the env for the
 new reward through ``compute_reward(next achieved_goal, new desired_goal, info)``, vectorised over the batch. Every
@@ -27,7 +29,17 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
 from stable_baselines3.common.vec_env import VecEnv
 
-from baselines.hyperparams import TABLE_DIR, env_id_of, load_table, policy_kwargs, schedule, table_entry, training_env
+from baselines.hyperparams import (
+    TABLE_DIR,
+    env_id_of,
+    load_table,
+    normalize_kwargs,
+    normalized,
+    policy_kwargs,
+    schedule,
+    table_entry,
+    training_env,
+)
 from baselines.ppo import ExactBudgetCallback
 from envs import resolve_env_id
 
@@ -43,10 +55,11 @@ GOAL_KEYS = ("observation", "achieved_goal", "desired_goal")
 # Arguments make_sac_her sets itself (the replay buffer is always HER); the rest of SAC's constructor is settable.
 _OWN_ARGUMENTS = {"self", "policy", "env", "seed", "tensorboard_log", "verbose", "device", "_init_setup_model"}
 VALID_HYPERPARAMS: frozenset[str] = frozenset(
-    {"n_envs", "policy"} | (set(inspect.signature(SAC.__init__).parameters) - _OWN_ARGUMENTS - {"replay_buffer_class"})
+    {"n_envs", "policy", "normalize"}
+    | (set(inspect.signature(SAC.__init__).parameters) - _OWN_ARGUMENTS - {"replay_buffer_class"})
 )
-"""Keys a table entry or a ``make_sac_her`` override may set: ``n_envs``, ``policy`` and SAC's constructor arguments
-(``replay_buffer_class`` excepted)."""
+"""Keys a table entry or a ``make_sac_her`` override may set: ``n_envs``, ``policy``, ``normalize`` (rl-zoo3's: true,
+false or ``VecNormalize`` arguments) and SAC's constructor arguments (``replay_buffer_class`` excepted)."""
 
 _BUFFER_OWN_ARGUMENTS = {"self", "buffer_size", "observation_space", "action_space", "env", "device", "n_envs"}
 VALID_REPLAY_BUFFER_KWARGS: frozenset[str] = frozenset(
@@ -112,8 +125,10 @@ def make_sac_her(
         params["train_freq"] = tuple(params["train_freq"])
     params["policy_kwargs"] = policy_kwargs(params.get("policy_kwargs") or {})
     params["replay_buffer_kwargs"] = dict(params.get("replay_buffer_kwargs") or {})
+    normalization = normalize_kwargs(params.pop("normalize", False), params.get("gamma", 0.99))
     vec_env = training_env(env, n_envs, seed, env_kwargs, "the SAC + HER settings")
     _check_goal_env(vec_env, int(params.get("learning_starts", 100)))
+    vec_env = normalized(vec_env, normalization)
 
     policy = params.pop("policy", None) or "MultiInputPolicy"
     return SAC(

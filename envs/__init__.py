@@ -72,6 +72,21 @@ ENV_IDS: dict[str, str] = {
 }
 """Short names used by the CLI and presets, mapped to registered ids."""
 
+THIRD_PARTY_ENV_IDS: dict[str, str] = {
+    "pointmaze": "PointMaze_UMaze-v3",
+    "fetch-reach": "FetchReach-v4",
+    "fetch-push": "FetchPush-v4",
+}
+"""Short names of the gymnasium-robotics envs the harness compares on, unmodified (docs/guide.md, "Your own env")."""
+
+PROTOCOL_ENV_KWARGS: dict[str, dict[str, object]] = {
+    # An episode ends at the goal (the registered default resamples the goal and goes on until the time limit, so
+    # the final step's is_success would not say whether the goal was reached): the protocol of the D4RL-style
+    # goal-reaching comparisons and of the third-party measurements (shared reference).
+    "PointMaze_UMaze-v3": {"continuing_task": False},
+}
+"""Keyword arguments the harness gives an env for training and evaluation alike, before ``--env-kwargs``."""
+
 PAPER_EVAL_KWARGS: dict[str, dict[str, object]] = {
     # The paper's particle evaluation: from (0, 0) to (0.5, 0.5), optimum -4.5 (original_code.md §6). Training uses
     # random starts (the registered default), so evaluation needs these explicitly.
@@ -93,12 +108,14 @@ _register("ebm/SawyerReach-v0", "envs.sawyer:SawyerReachEnv", 1000)
 
 
 def resolve_env_id(name: str) -> str:
-    """Map a short name (``particle``, ``maze``, ``reacher``, ``sawyer``) or a registered id to a registered id.
+    """Map a short name (``particle``, ``maze``, ``reacher``, ``sawyer``, or a third-party one such as
+    ``fetch-reach``) or a registered id to a registered id.
 
     :param name: short name or any Gymnasium id.
     :return: the Gymnasium id to pass to ``gym.make``.
     """
-    return ENV_IDS.get(name.lower(), name)
+    key = name.lower()
+    return ENV_IDS.get(key) or THIRD_PARTY_ENV_IDS.get(key) or name
 
 
-__all__ = ["ENV_IDS", "PAPER_EVAL_KWARGS", "resolve_env_id"]
+__all__ = ["ENV_IDS", "PAPER_EVAL_KWARGS", "PROTOCOL_ENV_KWARGS", "THIRD_PARTY_ENV_IDS", "resolve_env_id"]

@@ -32,7 +32,7 @@ from typing import Any
 import gymnasium as gym
 import yaml
 
-from envs import ENV_IDS, PAPER_EVAL_KWARGS, resolve_env_id
+from envs import ENV_IDS, PAPER_EVAL_KWARGS, PROTOCOL_ENV_KWARGS, THIRD_PARTY_ENV_IDS, resolve_env_id
 from eval.anchors import compute_anchors
 from eval.executors import executor_from_name
 from eval.flags import (
@@ -200,7 +200,8 @@ def resolve_env(name: str) -> str:
         env_id = bare_id
     if env_id not in gym.registry:
         raise ValueError(
-            f"unknown env {name!r}: use a short name ({', '.join(ENV_IDS)}) or a registered Gymnasium id "
+            f"unknown env {name!r}: use a short name ({', '.join([*ENV_IDS, *THIRD_PARTY_ENV_IDS])}) or a registered "
+            "Gymnasium id "
             "(e.g. Pendulum-v1, or module:EnvId to import the module that registers it)"
         )
     return env_id
@@ -224,7 +225,7 @@ def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0
             eval_episodes=settings["eval_episodes"],
             hyperparams=dict(settings["hyperparams"].get(agent, {})),
             preset=settings.get("preset") or "",
-            env_kwargs=dict(settings["env_kwargs"]),
+            env_kwargs={**PROTOCOL_ENV_KWARGS.get(env_id, {}), **settings["env_kwargs"]},
             eval_env_kwargs=evaluation_kwargs(env_id, settings),
             device=settings["device"],
             out_dir=settings["out"],
@@ -238,15 +239,21 @@ def build_jobs(settings: dict[str, Any], progress: bool = True, verbose: int = 0
 
 
 def evaluation_kwargs(env_id: str, settings: dict[str, Any]) -> dict[str, Any]:
-    """Keyword arguments of the evaluation env: the paper's evaluation configuration of ``env_id``
-    (``envs.PAPER_EVAL_KWARGS``), then ``--env-kwargs``, then ``--eval-env-kwargs`` (later ones win).
+    """Keyword arguments of the evaluation env: the harness's protocol for ``env_id`` (``envs.PROTOCOL_ENV_KWARGS``),
+    the paper's evaluation configuration (``envs.PAPER_EVAL_KWARGS``), then ``--env-kwargs``, then
+    ``--eval-env-kwargs`` (later ones win).
 
     :param env_id: the registered id.
     :param settings: the merged CLI settings.
     :return: the kwargs.
     """
 
-    return {**PAPER_EVAL_KWARGS.get(env_id, {}), **settings["env_kwargs"], **settings["eval_env_kwargs"]}
+    return {
+        **PROTOCOL_ENV_KWARGS.get(env_id, {}),
+        **PAPER_EVAL_KWARGS.get(env_id, {}),
+        **settings["env_kwargs"],
+        **settings["eval_env_kwargs"],
+    }
 
 
 def _anchors_for(jobs: Sequence[Job]) -> dict[str, Any]:

@@ -150,7 +150,7 @@ def evaluate_episodes(model: BaseAlgorithm, eval_env: VecEnv, n_eval_episodes: i
     def track_success(locals_: dict[str, Any], _globals: dict[str, Any]) -> None:
         # Same bookkeeping as EvalCallback._log_success_callback: the flag of the step that ends the episode.
         if locals_["done"]:
-            is_success = locals_["info"].get("is_success")
+            is_success = episode_success(locals_["info"])
             if is_success is not None:
                 successes.append(bool(is_success))
 
@@ -165,6 +165,24 @@ def evaluate_episodes(model: BaseAlgorithm, eval_env: VecEnv, n_eval_episodes: i
     )
     assert isinstance(scores, list) and isinstance(lengths, list)
     return EpisodeScores([float(s) for s in scores], [int(n) for n in lengths], successes)
+
+
+SUCCESS_KEYS = ("is_success", "success")
+"""The ``info`` keys that report success, first found wins: gymnasium-robotics' GoalEnv convention (Fetch, the
+``ebm/`` envs) and its maze envs' own key (PointMaze, AntMaze)."""
+
+
+def episode_success(info: dict[str, Any]) -> Any:
+    """The success flag of a step's ``info`` under any of :data:`SUCCESS_KEYS`, or None when the env reports none.
+
+    :param info: one env's step info.
+    :return: the flag as the env gave it, or None.
+    """
+    for key in SUCCESS_KEYS:
+        flag = info.get(key)
+        if flag is not None:
+            return flag
+    return None
 
 
 def _listed(one: EpisodeScores, n: int) -> EpisodeScores:
@@ -187,8 +205,12 @@ class RepeatAwareEvalCallback(EvalCallback):
     """The lists of scores and lengths that ``evaluate_policy`` fills (seen by its per-step callback)."""
 
     def _log_success_callback(self, locals_: dict[str, Any], globals_: dict[str, Any]) -> None:
+        # SB3's bookkeeping (the flag of the step that ends an episode), reading any of SUCCESS_KEYS.
         self._episodes = (locals_["episode_rewards"], locals_["episode_lengths"])
-        super()._log_success_callback(locals_, globals_)
+        if locals_["done"]:
+            flag = episode_success(locals_["info"])
+            if flag is not None:
+                self._is_success_buffer.append(flag)
 
     def _on_step(self) -> bool:
         if not (self.eval_freq > 0 and self.n_calls % self.eval_freq == 0) or self.n_eval_episodes <= 1:
@@ -338,10 +360,12 @@ def append_evaluation(path: Path, timesteps: int, episodes: EpisodeScores) -> No
 
 __all__ = [
     "PROBE_STEPS",
+    "SUCCESS_KEYS",
     "EpisodeScores",
     "RepeatAwareEvalCallback",
     "append_evaluation",
     "draws_no_randomness",
+    "episode_success",
     "evaluate_episodes",
     "last_evaluation",
     "repeats_exactly",

@@ -10,7 +10,7 @@ from typing import Any
 
 import yaml
 
-from envs import ENV_IDS
+from envs import ENV_IDS, THIRD_PARTY_ENV_IDS
 from eval.registry import AGENTS
 
 DEFAULTS: dict[str, Any] = {
@@ -143,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         action="extend",
         metavar="ENV",
-        help=f"env(s): a short name ({', '.join(ENV_IDS)}) or any registered Gymnasium id (default: particle)",
+        help=f"env(s): a short name ({', '.join([*ENV_IDS, *THIRD_PARTY_ENV_IDS])}) or any registered Gymnasium id "
+        "(default: particle)",
     )
     parser.add_argument(
         "--baseline",

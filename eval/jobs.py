@@ -16,7 +16,9 @@ Run folder ``<out>[/<variant>]/<env_short>/<agent>/seed_<k>/``:
 - ``metrics.json``: the final deterministic evaluation, any extra evaluations, the transitions really consumed,
   wall times, the machine and the job's fingerprint (``eval.provenance.completed_result`` reads it back, so that a
   finished job is skipped);
-- ``model.zip``: the trained model; ``error.txt`` instead when the job failed.
+- ``model.zip``: the trained model; ``error.txt`` instead when the job failed;
+- ``vecnormalize.pkl``: for a model trained on normalised observations (a baseline entry's ``normalize``), the
+  statistics it acts on.
 
 TensorBoard events go to ``<out>[/<variant>]/tb/<env_short>/<agent>_s<seed>_1/`` so that ``tensorboard --logdir
 <out>`` shows every agent and seed of an env side by side.
@@ -33,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from ebm_agent.presets import PRESETS
-from envs import ENV_IDS
+from envs import ENV_IDS, THIRD_PARTY_ENV_IDS
 
 EVAL_SEED_OFFSET = 10_000
 """The evaluation env is seeded ``seed + EVAL_SEED_OFFSET`` so that it never replays the training env's episodes."""
@@ -53,7 +55,11 @@ STATE_FILE = "state.json"
 GRAPH_TRANSITIONS = "graph_transitions.npz"
 """The real transitions an agent with graph subgoals built its final graph from, kept beside its model."""
 
-RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", GRAPH_TRANSITIONS, "error.txt")
+VEC_NORMALIZE = "vecnormalize.pkl"
+"""The observation statistics of a model trained on a ``VecNormalize`` env (an entry's ``normalize``), beside its
+model: ``VecNormalize.load(path, venv)`` gives the env it acts on."""
+
+RUN_OUTPUTS = ("metrics.json", "evaluations.npz", "model.zip", GRAPH_TRANSITIONS, VEC_NORMALIZE, "error.txt")
 """Files a run writes; a rerun removes stale ones first (an old ``evaluations.npz`` would join the new curve)."""
 
 
@@ -196,7 +202,7 @@ def env_short_name(env_id: str) -> str:
     :param env_id: Gymnasium id, optionally ``module:id``.
     :return: a name without path separators.
     """
-    for short, registered in ENV_IDS.items():
+    for short, registered in (*ENV_IDS.items(), *THIRD_PARTY_ENV_IDS.items()):
         if env_id in (registered, f"envs:{registered}"):
             return short
     return env_id.replace("/", "_").replace(":", "_")

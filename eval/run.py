@@ -26,6 +26,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import TensorBoardOutputFormat, configure
 
 import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
+from baselines.hyperparams import normalized_like, vec_normalize_of
 from ebm_agent.datasets import collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from ebm_agent.probe import model_quality
@@ -43,6 +44,7 @@ from eval.jobs import (
     GRAPH_TRANSITIONS,
     RESUME_FOLDER,
     RUN_OUTPUTS,
+    VEC_NORMALIZE,
     Job,
     JobResult,
     library_versions,
@@ -198,7 +200,9 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         verbose=job.verbose,
     )
     eval_kwargs = evaluation_env_kwargs(job)
-    eval_env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
+    eval_env = normalized_like(
+        model, make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
+    )
     resume = read_run_state(job) if resumable(model, job) else None
     if resume is not None:  # go on from the last checkpoint of a run cut short, with its envs as they were
         fresh_env = model.get_env()
@@ -231,6 +235,9 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: evaluate_with(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
+        normalizer = vec_normalize_of(model)
+        if normalizer is not None:  # the observation statistics the model acts on (SB3's own pickle)
+            normalizer.save(str(run_dir / VEC_NORMALIZE))
         save_graph_transitions(model, run_dir / GRAPH_TRANSITIONS)
         quality = model_quality_of(model, job)
         wall_time = time.perf_counter() - start + earlier
@@ -415,7 +422,7 @@ def evaluate_with(model: Any, job: Job, changes: dict[str, Any]) -> dict[str, An
     """
 
     kwargs = {**evaluation_env_kwargs(job), **changes}
-    env = make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    env = normalized_like(model, make_vec_env(job.env_id, n_envs=1, seed=job.seed + EVAL_SEED_OFFSET, env_kwargs=kwargs))
     try:
         episodes = evaluate_episodes(model, env, job.eval_episodes)
     finally:
