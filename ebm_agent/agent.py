@@ -120,8 +120,8 @@ class EBMPlannerAgent(PlannerAgentBase):
         contrastive loss and its L2 term, planned, perturbed and hard negatives, the L2 anneal).
     :param clip_sigma: per-element gradient clip of the original's Adam (3.0), None for plain Adam.
     :param online: :class:`OnlineConfig` or a dict of its fields.
-    :param inverse_dynamics: ``"ground_truth"``, ``"mlp"``, ``"rls"``, an instance, or None (the default): the
-        env's own where it has them, else the learned default (:class:`~ebm_agent.base.PlannerAgentBase`).
+    :param inverse_dynamics: ``"ground_truth"``, ``"rls_tracking"``, ``"rls"``, ``"mlp"``, an instance, or None (the
+        default): the env's own where it has them, else the learned default (:class:`~ebm_agent.base.PlannerAgentBase`).
     :param subgoal_graph: the graph subgoals of :class:`~ebm_agent.base.PlannerAgentBase` (issue #36); its edges
         may come from this agent's energy (the default). None (the default, the paper's): plans aim at the goal.
     :param explore: frontier exploration during ``learn`` (:class:`~ebm_agent.base.PlannerAgentBase`). None (the

@@ -17,11 +17,14 @@ __all__ = [
     "GroundTruthInverseDynamics",
     "InverseDynamics",
     "MLPInverseDynamics",
+    "PlanFollower",
     "RLSInverseDynamics",
     "make_inverse_dynamics",
 ]
 
-INVERSE_DYNAMICS_KINDS = ("ground_truth", "mlp", "rls")
+INVERSE_DYNAMICS_KINDS = ("ground_truth", "mlp", "rls", "rls_tracking")
+"""The kinds :func:`make_inverse_dynamics` builds: the env's own, a learned MLP, recursive least squares solved for
+the next planned state (``"rls"``), or the same fit following the rest of the plan (``"rls_tracking"``)."""
 
 
 @runtime_checkable
@@ -55,6 +58,21 @@ class InverseDynamics(Protocol):
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """:param state: a dict from :meth:`state_dict`."""
+        ...
+
+
+@runtime_checkable
+class PlanFollower(Protocol):
+    """An inverse model that can aim at several planned states ahead, not only the next one."""
+
+    def follow(self, states: np.ndarray, plans_ahead: Sequence[np.ndarray]) -> np.ndarray:
+        """
+        The first action of each env's action sequence that best follows its planned states.
+
+        :param states: [B, D] the states the actions start from.
+        :param plans_ahead: B arrays [k_b, D] (k_b >= 1): the planned states after each one, in order.
+        :return: [B, A] actions within the action bounds.
+        """
         ...
 
 
@@ -200,6 +218,13 @@ class RLSInverseDynamics:
     ``ridge`` is absolute (0.3 as the original), so it only acts as a mild prior when W_a is large; for a system
     whose actions move the state little per step (the particle moves 0.05 per unit action) lower it.
 
+    With ``track_steps`` other than 1, :meth:`follow` turns a plan into actions the way a tracking controller does
+    (the planned states followed by a PD controller of the third-party reference's Diffuser numbers): through the
+    fitted model it solves for the whole action sequence a_0 .. a_{k-1} whose predicted states best match the next
+    k planned states, each dim in units of its real moves (the running std of s' - s), and returns a_0. A plan whose
+    positions and velocities disagree (a planner that has not learnt that positions move by the velocities) is then
+    followed where it goes over k steps, not matched one inconsistent step at a time.
+
     A fresh fit has W_a = 0, and the solve then returns the prior (zero) action for every transition: an agent
     acting on it would never move, so its data would never identify W_a. Until ``warmup`` transitions have been
     folded in, the model therefore answers with actions drawn uniformly within the bounds (from its own seeded
@@ -216,6 +241,8 @@ class RLSInverseDynamics:
     :param warmup: transitions of uniformly random actions before the fit is used (None: 10 per feature, i.e.
         10 x (len(state_dims) + A + 1)); 0 solves from the first call.
     :param seed: seed of the warm-up actions' generator.
+    :param track_steps: planned states :meth:`follow` aims at: 1 (the one-step solve of ``__call__``), k > 1 (up to
+        k), or None (every planned state it is given).
     """
 
     def __init__(
@@ -230,6 +257,7 @@ class RLSInverseDynamics:
         state_dims: Sequence[int] | None = None,
         warmup: int | None = None,
         seed: int | None = None,
+        track_steps: int | None = 1,
     ) -> None:
         self.state_dim = _check_dim(state_dim, "state_dim", "RLSInverseDynamics")
         self.action_dim = _check_dim(action_dim, "action_dim", "RLSInverseDynamics")
@@ -256,6 +284,13 @@ class RLSInverseDynamics:
         self.weights = np.zeros((num_sub, self.num_features))  # [d, F] W = [W_s | W_a | b]
         self.covariance = np.eye(self.num_features) * self.init_cov  # [F, F] P
         self.num_updates = 0
+        if track_steps is not None and (
+            isinstance(track_steps, bool) or not isinstance(track_steps, int | np.integer) or track_steps < 1
+        ):
+            raise ValueError(f"RLSInverseDynamics: track_steps must be an int >= 1 or None, got {track_steps!r}.")
+        self.track_steps = None if track_steps is None else int(track_steps)
+        self.move_sums = np.zeros((2, num_sub))  # [2, d] sums of the real moves s' - s and of their squares
+        self.move_count = 0
 
     def __call__(self, states: np.ndarray, next_states: np.ndarray, prior_actions: np.ndarray | None = None) -> np.ndarray:
         """
@@ -286,6 +321,69 @@ class RLSInverseDynamics:
         actions = np.linalg.lstsq(normal, rhs.T, rcond=None)[0].T  # lstsq: fine even while W_a is still zero
         return np.clip(actions, self.action_low, self.action_high).astype(np.float32)
 
+    def follow(self, states: np.ndarray, plans_ahead: Sequence[np.ndarray]) -> np.ndarray:
+        """
+        The first action of each action sequence that best follows the planned states through the fitted model.
+
+        With ``track_steps`` 1 this is ``__call__`` towards the first planned state, draw for draw. Otherwise, for k
+        planned states (at most ``track_steps``), the stacked predictions s_j = M s_{j-1} + B a_{j-1} + b are
+        linear in a = [a_0 .. a_{k-1}]: the solve minimises sum_j |(s_j - plan_j) / sigma|^2 + ridge |a|^2, with sigma
+        [d] the std of the real moves per dim (ones before any), and returns a_0 clipped to the bounds.
+
+        :param states: [B, D].
+        :param plans_ahead: B arrays [k_b, D], k_b >= 1: each env's planned states after its state.
+        :return: [B, A] actions (uniformly random ones during the warm-up).
+        """
+        if len(plans_ahead) != len(states):
+            raise ValueError(
+                f"RLSInverseDynamics.follow: {len(plans_ahead)} plans for {len(states)} states; pass one per state."
+            )
+        ahead = [np.asarray(plan).reshape(-1, self.state_dim) for plan in plans_ahead]
+        if any(plan.shape[0] == 0 for plan in ahead):
+            raise ValueError("RLSInverseDynamics.follow: every plan needs at least one planned state.")
+        firsts = np.stack([plan[0] for plan in ahead]) if ahead else np.zeros((0, self.state_dim))  # [B, D] as given
+        if self.track_steps == 1 or self.num_updates < self.warmup:
+            return self(states, firsts)
+        states, _ = _check_pairs(states, firsts, self.state_dim, "RLSInverseDynamics")
+        limit = self.track_steps or max(plan.shape[0] for plan in ahead)
+        lengths = np.array([min(plan.shape[0], limit) for plan in ahead])
+        actions = np.zeros((len(states), self.action_dim))
+        for k in np.unique(lengths):  # one stacked solve per number of steps ahead
+            rows = np.flatnonzero(lengths == k)
+            targets = np.stack([ahead[row][:k, self.state_dims] for row in rows]).astype(np.float64)  # [b, k, d]
+            actions[rows] = self._sequence_solve(states[rows][:, self.state_dims].astype(np.float64), targets)
+        return np.clip(actions, self.action_low, self.action_high).astype(np.float32)
+
+    def _sequence_solve(self, s_sub: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """First actions [b, A] of the weighted least-squares sequences from ``s_sub`` [b, d] to ``targets`` [b, k, d]."""
+        num_sub, num_actions = self.state_dims.size, self.action_dim
+        steps = targets.shape[1]
+        w_state = self.weights[:, :num_sub]  # [d, d] M
+        w_action = self.weights[:, num_sub : num_sub + num_actions]  # [d, A] B
+        bias = self.weights[:, -1]  # [d] b
+        powers = [np.eye(num_sub)]  # M^0 .. M^(k-1)
+        for _ in range(steps - 1):
+            powers.append(w_state @ powers[-1])
+        gains = np.zeros((steps, num_sub, steps, num_actions))  # [k, d, k, A] d s_j / d a_i = M^(j-i) B for i <= j
+        for j in range(steps):
+            for i in range(j + 1):
+                gains[j, :, i] = powers[j - i] @ w_action
+        free = np.zeros_like(targets)  # [b, k, d] the predictions with every action zero
+        state = s_sub
+        for j in range(steps):
+            state = state @ w_state.T + bias
+            free[:, j] = state
+        count = self.move_count
+        scale = np.ones(num_sub)
+        if count > 1:
+            mean = self.move_sums[0] / count
+            scale = np.sqrt(np.maximum(self.move_sums[1] / count - mean**2, 0.0)) + 1e-6
+        stacked = (gains / scale[None, :, None, None]).reshape(steps * num_sub, steps * num_actions)  # [k d, k A]
+        residuals = ((targets - free) / scale).reshape(len(s_sub), steps * num_sub)  # [b, k d]
+        normal = stacked.T @ stacked + self.ridge * np.eye(steps * num_actions)  # [k A, k A]
+        sequence = np.linalg.lstsq(normal, stacked.T @ residuals.T, rcond=None)[0].T  # [b, k A]
+        return sequence[:, :num_actions]
+
     def update(self, states: np.ndarray, next_states: np.ndarray, actions: np.ndarray) -> dict[str, float]:
         """
         Fold a batch of executed transitions into the least-squares fit.
@@ -298,6 +396,9 @@ class RLSInverseDynamics:
             np.float64
         )  # [B, F]
         targets = next_states[:, self.state_dims].astype(np.float64)  # [B, d]
+        moves = targets - features[:, : self.state_dims.size]  # [B, d] s' - s
+        self.move_sums += np.stack([moves.sum(axis=0), (moves**2).sum(axis=0)])
+        self.move_count += moves.shape[0]
         error = float(np.mean((targets - features @ self.weights.T) ** 2)) if states.shape[0] else 0.0
         for start in range(0, states.shape[0], 256):  # block size bounds the [b, b] innovation matrix
             self._block_update(features[start : start + 256], targets[start : start + 256])
@@ -326,6 +427,8 @@ class RLSInverseDynamics:
             "num_updates": self.num_updates,
             "state_dims": self.state_dims.copy(),
             "rng_state": json.dumps(self._rng.bit_generator.state),
+            "move_sums": self.move_sums.copy(),
+            "move_count": self.move_count,
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -345,6 +448,9 @@ class RLSInverseDynamics:
         self.num_updates = int(state["num_updates"])
         if state.get("rng_state") is not None:  # absent in states saved before the warm-up existed
             self._rng.bit_generator.state = json.loads(state["rng_state"])
+        # Absent in states saved before plan following existed: its weights then start from ones.
+        self.move_sums = np.asarray(state.get("move_sums", np.zeros_like(self.move_sums)), dtype=np.float64).copy()
+        self.move_count = int(state.get("move_count", 0))
 
 
 def make_inverse_dynamics(
@@ -359,7 +465,8 @@ def make_inverse_dynamics(
     """
     Build an inverse-dynamics model by name.
 
-    :param kind: ``"ground_truth"`` (needs ``fn``), ``"mlp"`` or ``"rls"`` (need ``state_dim``).
+    :param kind: ``"ground_truth"`` (needs ``fn``), ``"mlp"``, ``"rls"`` or ``"rls_tracking"`` (RLS with
+        ``track_steps=None``; the learned ones need ``state_dim``).
     :param action_low: [A] lower action bounds.
     :param action_high: [A] upper action bounds.
     :param state_dim: D (learned models).
@@ -373,18 +480,21 @@ def make_inverse_dynamics(
         if fn is None:
             raise ValueError(
                 "make_inverse_dynamics('ground_truth') needs fn, e.g. fn=env.unwrapped.inverse_dynamics; "
-                "use kind='mlp' or 'rls' for an env without one."
+                "use kind='rls_tracking', 'rls' or 'mlp' for an env without one."
             )
         if kwargs:
             raise ValueError(f"make_inverse_dynamics('ground_truth') takes no options, got {sorted(kwargs)}.")
         return GroundTruthInverseDynamics(fn, action_low, action_high)
-    if kind in ("mlp", "rls"):
+    if kind in ("mlp", "rls", "rls_tracking"):
         if state_dim is None:
             raise ValueError(f"make_inverse_dynamics({kind!r}) needs state_dim.")
         if action_dim is None:
             action_dim = int(np.asarray(action_low).reshape(-1).shape[0])
-        cls = MLPInverseDynamics if kind == "mlp" else RLSInverseDynamics
-        return cls(state_dim, action_dim, action_low, action_high, **kwargs)
+        if kind == "mlp":
+            return MLPInverseDynamics(state_dim, action_dim, action_low, action_high, **kwargs)
+        if kind == "rls_tracking":
+            kwargs = {"track_steps": None, **kwargs}
+        return RLSInverseDynamics(state_dim, action_dim, action_low, action_high, **kwargs)
     raise ValueError(f"Unknown inverse dynamics kind {kind!r}; choose one of {list(INVERSE_DYNAMICS_KINDS)}.")
 
 

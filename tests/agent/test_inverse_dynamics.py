@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -207,7 +208,7 @@ def test_rls_state_dict_round_trip_and_clipping() -> None:
     assert np.all(np.abs(model(states, far)) <= 0.5)
 
 
-@pytest.mark.parametrize("kind", ["ground_truth", "mlp", "rls"])
+@pytest.mark.parametrize("kind", ["ground_truth", "mlp", "rls", "rls_tracking"])
 def test_make_inverse_dynamics(kind: str) -> None:
     model = make_inverse_dynamics(kind, LOW, HIGH, state_dim=2, fn=lambda s, s2: 20 * (s2 - s))
     assert isinstance(model, InverseDynamics)
@@ -229,3 +230,107 @@ def test_make_inverse_dynamics_errors() -> None:
         RLSInverseDynamics(4, 2, LOW, HIGH, state_dims=(0, 4))
     with pytest.raises(ValueError, match="forgetting"):
         RLSInverseDynamics(4, 2, LOW, HIGH, forgetting=0.0)
+
+
+# ------------------------------------------------------------------------------------- following the rest of a plan
+def _fitted_point_mass_model(track_steps: int | None) -> tuple[RLSInverseDynamics, Any]:
+    """RLS fitted on 600 random-action transitions of the damped point mass (tests/agent/point_mass.py)."""
+    from point_mass import PointMassEnv  # tests/agent is on sys.path
+
+    env, rng = PointMassEnv(), np.random.default_rng(0)
+    model = RLSInverseDynamics(4, 2, LOW, HIGH, ridge=1e-6, warmup=0, track_steps=track_steps)
+    obs, _ = env.reset(seed=0)
+    states, next_states, actions = [], [], []
+    for step in range(600):
+        action = rng.uniform(-1, 1, 2)
+        states.append(obs["observation"])
+        obs, *_ = env.step(action)
+        next_states.append(obs["observation"])
+        actions.append(action)
+        if step % 100 == 99:
+            obs, _ = env.reset(seed=step)
+    model.update(np.array(states), np.array(next_states), np.array(actions))
+    return model, env
+
+
+def _reach_rate(env: Any, policy: Any, episodes: int = 10) -> float:
+    """Fraction of episodes (reset seeds 100..) that reach the goal within 100 steps."""
+    reached = []
+    for episode in range(episodes):
+        obs, _ = env.reset(seed=100 + episode)
+        for _ in range(100):
+            obs, _reward, _terminated, _truncated, info = env.step(policy(obs))
+            if info["is_success"]:
+                break
+        reached.append(info["is_success"])
+    return float(np.mean(reached))
+
+
+def _straight_plan(obs: dict[str, np.ndarray], steps: int = 10) -> np.ndarray:
+    """[steps, 4] positions on the straight line to the goal with zero velocities: a plan whose velocities disagree
+    with its positions, as an untrained energy's plans do."""
+    state, goal = obs["observation"], obs["desired_goal"]
+    fractions = np.linspace(0.0, 1.0, steps + 1)[1:, None]
+    positions = state[:2] + fractions * (goal - state[:2])
+    return np.hstack([positions, np.zeros_like(positions)])
+
+
+def test_following_the_plan_reaches_goals_that_the_one_step_solve_zero_and_random_actions_do_not() -> None:
+    follower, env = _fitted_point_mass_model(track_steps=None)
+    one_step, _ = _fitted_point_mass_model(track_steps=1)
+    rng = np.random.default_rng(1)
+
+    def follows(model: RLSInverseDynamics) -> Any:
+        return lambda obs: model.follow(obs["observation"][None], [_straight_plan(obs)])[0]
+
+    assert _reach_rate(env, follows(follower)) >= 0.9
+    # Controls: the next planned state alone asks for zero velocity, i.e. to brake; zero torque and random ones.
+    assert _reach_rate(env, follows(one_step)) <= 0.1
+    assert _reach_rate(env, lambda obs: np.zeros(2)) <= 0.1
+    assert _reach_rate(env, lambda obs: rng.uniform(-1, 1, 2)) <= 0.1
+
+
+def test_following_a_feasible_plan_recovers_its_first_action_exactly() -> None:
+    rng = np.random.default_rng(2)
+    system = _linear_system(0)
+    model = RLSInverseDynamics(4, 2, LOW, HIGH, ridge=0.0, state_dims=(0, 1, 2), warmup=0, track_steps=None)
+    for _ in range(10):
+        states, actions = rng.uniform(-1, 1, (16, 4)), rng.uniform(-1, 1, (16, 2))
+        model.update(states, _step(system, states, actions), actions)
+    starts = rng.uniform(-1, 1, (3, 4))
+    sequences = rng.uniform(-0.9, 0.9, (3, 5, 2))
+    plans, state = [], starts
+    for step in range(5):
+        state = _step(system, state, sequences[:, step])
+        plans.append(state)
+    ahead = [np.stack(plans, axis=1)[row, : 5 - row] for row in range(3)]  # 5, 4 and 3 states ahead
+    np.testing.assert_allclose(model.follow(starts, ahead), sequences[:, 0], atol=1e-3)
+
+
+def test_following_with_one_step_is_the_one_step_solve_draw_for_draw() -> None:
+    rng = np.random.default_rng(3)
+    states, next_states, actions = _particle_batch(rng, 64)
+    twin_a = RLSInverseDynamics(2, 2, LOW, HIGH, seed=5)
+    twin_b = RLSInverseDynamics(2, 2, LOW, HIGH, seed=5)
+    plans = [np.stack([next_states[row], next_states[row] + 0.01]) for row in range(8)]
+    for _ in range(2):  # in the warm-up (random draws) and after it
+        np.testing.assert_array_equal(twin_a.follow(states[:8], plans), twin_b(states[:8], next_states[:8]))
+        twin_a.update(states, next_states, actions)
+        twin_b.update(states, next_states, actions)
+
+
+def test_follow_checks_its_plans_and_keeps_its_move_statistics() -> None:
+    model = make_inverse_dynamics("rls_tracking", LOW, HIGH, state_dim=2)
+    assert isinstance(model, RLSInverseDynamics) and model.track_steps is None
+    with pytest.raises(ValueError, match="2 plans for 1 states"):
+        model.follow(np.zeros((1, 2)), [np.zeros((1, 2)), np.zeros((1, 2))])
+    with pytest.raises(ValueError, match="at least one planned state"):
+        model.follow(np.zeros((1, 2)), [np.zeros((0, 2))])
+    with pytest.raises(ValueError, match="track_steps"):
+        RLSInverseDynamics(2, 2, LOW, HIGH, track_steps=0)
+    states, next_states, actions = _particle_batch(np.random.default_rng(4), 32)
+    model.update(states, next_states, actions)
+    twin = make_inverse_dynamics("rls_tracking", LOW, HIGH, state_dim=2)
+    twin.load_state_dict(model.state_dict())
+    assert twin.move_count == 32
+    np.testing.assert_array_equal(twin.move_sums, model.move_sums)
