@@ -14,7 +14,7 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from envs import ENV_IDS, PAPER_EVAL_KWARGS
+from envs import ENV_IDS, PAPER_EVAL_KWARGS, PROTOCOL_ENV_KWARGS, THIRD_PARTY_ENV_IDS
 from eval.jobs import Job
 from eval.paper.data import paper_data
 from eval.presets import PRESET_DIR, load_preset
@@ -226,7 +226,7 @@ def make_cell(
     *,
     mode: str = "online",
     dataset: str = "random",
-    budget_multiple: int = 1,
+    budget_multiple: float = 1,
     env_kwargs: dict[str, Any] | None = None,
     eval_env_kwargs: dict[str, Any] | None = None,
     offline_kwargs: dict[str, Any] | None = None,
@@ -244,13 +244,15 @@ def make_cell(
 
     :param context: scale, folder, seeds, device.
     :param setting: the row label.
-    :param env: env short name.
+    :param env: env short name, of the project's envs (``envs.ENV_IDS``) or the third-party ones
+        (``envs.THIRD_PARTY_ENV_IDS``, which train and evaluate with ``envs.PROTOCOL_ENV_KWARGS``).
     :param agent: agent name.
     :param variant: the configuration's folder name (runs of equal configurations must share it).
     :param paper: the paper's number.
     :param mode: ``online``, ``pretrained`` or ``untrained`` (budget 0).
     :param dataset: pretrained only: the dataset.
-    :param budget_multiple: online only: the budget as a multiple of the scale's online budget.
+    :param budget_multiple: online only: the budget as a multiple of the scale's online budget (0.2: 10,000 of the
+        paper scale's 50,000), rounded to whole transitions.
     :param env_kwargs: kwargs of the training and evaluation envs, over the scale's.
     :param eval_env_kwargs: kwargs of the evaluation env only, over those (e.g. the paper's start for an agent
         trained from random starts).
@@ -279,15 +281,15 @@ def make_cell(
     cell_seeds = context.seeds_for()
     if context.seeds is None and seeds and scale.name in seeds:
         cell_seeds = _seed_tuple(seeds[scale.name], f"the seeds of cell {setting!r} ({part}) at scale {scale.name}")
-    env_id = ENV_IDS[env]
-    train_kwargs = {**scale.env_kwargs, **(env_kwargs or {})}
+    env_id = ENV_IDS.get(env) or THIRD_PARTY_ENV_IDS[env]
+    train_kwargs = {**PROTOCOL_ENV_KWARGS.get(env_id, {}), **scale.env_kwargs, **(env_kwargs or {})}
     agent_kwargs = {
         **preset_hyperparams(env).get(agent, {}),
         **scale.hyperparams.get(agent, {}),
         **(hyperparams or {}),
     }
     pretrained = mode == "pretrained"
-    budget = 0 if mode == "untrained" else scale.pretrain if pretrained else scale.online * budget_multiple
+    budget = 0 if mode == "untrained" else scale.pretrain if pretrained else max(round(scale.online * budget_multiple), 1)
     offline = {}
     collector: dict[str, Any] = {}
     if pretrained:

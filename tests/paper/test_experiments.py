@@ -40,6 +40,8 @@ def test_every_experiment_builds_with_the_paper_budgets(tmp_path):
             assert job.timesteps == 100_000
         elif job.mode == "untrained":
             assert job.timesteps == 0 and job.agent == "ebm"
+        elif job.variant.startswith("third_party_"):  # issue 46's budgets: 5,000 and 10,000 on FetchReach
+            assert job.timesteps == {"5k": 5_000, "10k": 10_000, "50k": 50_000}[job.variant.split("_")[2]]
         elif job.agent != "ppo":
             assert job.timesteps == 50_000
     for part in parts:
