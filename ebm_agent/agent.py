@@ -337,6 +337,9 @@ class EBMPlannerAgent(PlannerAgentBase):
         goal = torch.as_tensor(goals, device=self.device)  # [n, G]
         init = None if init_plans is None else torch.as_tensor(init_plans, device=self.device)  # [n, T+1, D]
         self.policy.set_training_mode(False)
+        if isinstance(self.planner, MPPIPlanner) and self.planner.config.noise_units == "step":
+            step = self._measured_step()  # [D] or None (no real move yet: state units)
+            self.planner.noise_unit = None if step is None else torch.as_tensor(step, dtype=torch.float32, device=self.device)
         # The configured budget is the planner's own (a full search, or its warm-start budget for a warm start); a
         # fresh plan made while learning may have a budget of its own (train_iterations).
         iterations = learn_budgets(self.planner_config)[0] if training and init is None else None

@@ -551,8 +551,14 @@ class PlannerAgentBase(CheckpointMixin, BaseAlgorithm):
         """
         if self.online.threshold_units == "state":
             return 1.0
+        step = self._measured_step()
+        return float("nan") if step is None else step
+
+    def _measured_step(self) -> np.ndarray | None:
+        """[D] the largest real |s' - s| per dim recorded so far (a dim that never moved takes a thousandth of the
+        largest dim's step), or None before any was recorded: the unit of ``"step"`` thresholds and planner noise."""
         if self._moves is None or self._moves.count == 0:
-            return float("nan")
+            return None
         step = self._moves.largest.astype(np.float64)  # [D]
         floor = 1e-3 * float(step.max()) if step.max() > 0 else 1.0
         return np.maximum(step, floor)

@@ -29,6 +29,7 @@ __all__ = [
     "AUTOCAST_DTYPES",
     "CPU_CHUNK_TRANSITIONS",
     "NOISE_BLOCK_BYTES",
+    "NOISE_UNITS",
     "MPPIConfig",
     "MPPIPlanner",
     "native_bf16",
@@ -56,6 +57,9 @@ so the recorded figures that plan many envs at once are unchanged."""
 
 CostFn = Callable[[Tensor, Tensor | None], Tensor]
 
+NOISE_UNITS = ("state", "step")
+"""Values of ``MPPIConfig.noise_units``."""
+
 
 @dataclass
 class MPPIConfig:
@@ -71,7 +75,13 @@ class MPPIConfig:
     :param iterations: MPPI iterations per plan (the original's num_plan_steps).
     :param temperature: lambda in softmax(-cost / lambda); the original hard-coded cost * 10000, i.e. 1e-4, which is
         close to picking the best candidate.
-    :param noise_scale: c in N(0, c (A^T A)^-1).
+    :param noise_scale: c in N(0, c (A^T A)^-1), in the unit of ``noise_units``.
+    :param noise_units: the unit of the perturbations: ``"state"`` (the default, the original's), the env's own state
+        units, the same noise on every dim; ``"step"``, each dim's perturbation multiplied by that dim's measured real
+        step (the agent sets :attr:`MPPIPlanner.noise_unit` from the largest real |s' - s| per dim it has learnt
+        from, as ``OnlineConfig.threshold_units="step"`` does), so that ``noise_scale`` is in squared steps and a dim
+        that barely moves (FetchReach's fingers, 4e-4 a step) is not perturbed as much as one that moves 0.03. Until
+        a real move is recorded the noise is in state units.
     :param terminal_first_difference: keep the original's terminal first-difference row in the STOMP matrix.
     :param include_mean: also score the current mean as a candidate (the original did not), so the mean can only
         be replaced by a candidate that is at least as good when the temperature is low.
@@ -113,6 +123,7 @@ class MPPIConfig:
     iterations: int = 80
     temperature: float = 1e-4
     noise_scale: float = 1e-5
+    noise_units: str = "state"
     terminal_first_difference: bool = True
     include_mean: bool = False
     compile: bool = False
@@ -135,6 +146,8 @@ class MPPIConfig:
             raise ValueError(f"MPPIConfig.iterations must be an int >= 0, got {self.iterations!r}.")
         if not self.temperature > 0:
             raise ValueError(f"MPPIConfig.temperature must be > 0, got {self.temperature}; the original used 1e-4.")
+        if self.noise_units not in NOISE_UNITS:
+            raise ValueError(f"MPPIConfig.noise_units must be one of {NOISE_UNITS}, got {self.noise_units!r}.")
         if not self.noise_scale > 0:
             raise ValueError(f"MPPIConfig.noise_scale must be > 0, got {self.noise_scale}; the original used 1e-5.")
         if not isinstance(self.compile, bool):
@@ -192,6 +205,8 @@ class MPPIPlanner:
         self.state_dim = state_dim
         self.device = torch.device(device)
         self.noise = StompNoise(config.horizon, config.noise_scale, config.terminal_first_difference, device=self.device)
+        # [D] per-dim multiplier of the perturbations (``noise_units="step"``: the measured real step), or None.
+        self.noise_unit: Tensor | None = None
         self.state_low, self.state_high = as_bounds(state_low, state_high, state_dim, self.device)
         # Compiled callables, built on first use; not pickled (the agent saves the planner with the model).
         self._compiled_energy: tuple[object, Callable[..., Tensor]] | None = None
@@ -416,7 +431,9 @@ class MPPIPlanner:
         block = max(1, min(iterations, NOISE_BLOCK_BYTES // max(per_iteration, 1)))
         for first in range(0, iterations, block):
             size = min(block, iterations - first)
-            yield self.noise.sample((size, num_envs, self.config.num_samples), self.state_dim, generator)
+            sample = self.noise.sample((size, num_envs, self.config.num_samples), self.state_dim, generator)
+            unit = getattr(self, "noise_unit", None)  # absent in planners pickled before step units existed
+            yield sample if unit is None else sample.mul_(unit.to(sample.device, sample.dtype))
 
     def _fast_cost(self, cost: PlanCost) -> CostFn:
         """The cost as evaluated inside the loop: with the compiled transition energy and under autocast if set."""

@@ -20,7 +20,7 @@ from ebm_agent.inverse_dynamics import RLSInverseDynamics
 # Cheap planning (the fast preset's budgets, fewer fresh iterations) so that a run learns in a few seconds.
 CHEAP: dict[str, Any] = {"planner_config": {"iterations": 20, "warm_iterations": 3, "train_iterations": 10}}
 BUDGET = 1000
-EPISODES = 5
+EPISODES = 10
 
 
 def _env() -> TimeLimit:
@@ -47,7 +47,7 @@ def _trained(**kwargs: Any) -> EBMPlannerAgent:
     torch.set_num_threads(1)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the learned-default notice, tested below
-        agent = EBMPlannerAgent("MultiInputPolicy", _env(), seed=0, **CHEAP, **kwargs)
+        agent = EBMPlannerAgent("MultiInputPolicy", _env(), seed=0, **{**CHEAP, **kwargs})
     agent.learn(BUDGET)
     return agent
 
@@ -73,6 +73,13 @@ def test_the_learned_default_reaches_goals_that_zero_random_and_one_step_actions
     zero = _reach_rate(lambda obs, state, start: (np.zeros(2, dtype=np.float32), None))
     random = _reach_rate(lambda obs, state, start: (rng.uniform(-1, 1, 2).astype(np.float32), None))
     assert default >= 0.8, default
-    # Controls: the same agent solving for the next planned state alone (1000 transitions, seed 0: 0.2), and no model.
-    assert one_step <= 0.4 and default > one_step, (default, one_step)
+    # Controls: the same agent solving for the next planned state alone (1000 transitions, seed 0, 10 episodes: 0.3),
+    # and no model at all.
+    assert one_step <= 0.5 and default > one_step, (default, one_step)
     assert zero <= 0.2 and random <= 0.2, (zero, random)
+
+
+def test_planner_noise_in_steps_scales_each_dim_by_its_largest_real_move() -> None:
+    agent = _trained(planner_config={**CHEAP["planner_config"], "noise_units": "step", "noise_scale": 3e-4})
+    agent.predict(_env().reset(seed=0)[0], deterministic=True)
+    np.testing.assert_allclose(agent.planner.noise_unit.numpy(), agent.real_moves.largest, rtol=1e-6)

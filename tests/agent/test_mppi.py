@@ -196,3 +196,30 @@ def test_bad_inputs_are_rejected() -> None:
         MPPIConfig(temperature=0.0)
     with pytest.raises(ValueError, match="state_high"):
         MPPIPlanner(MPPIConfig(), state_dim=2, state_high=[1.0, 1.0, 1.0])
+
+
+def test_noise_units_step_scales_each_dims_noise_by_its_unit() -> None:
+    planner = MPPIPlanner(MPPIConfig(horizon=HORIZON, noise_units="step"), state_dim=2)
+    plain = planner.draw_noise(2, 3, torch.Generator().manual_seed(0))  # no unit yet: state units
+    planner.noise_unit = torch.tensor([0.5, 1e-3])
+    scaled = planner.draw_noise(2, 3, torch.Generator().manual_seed(0))
+    torch.testing.assert_close(scaled, plain * torch.tensor([0.5, 1e-3]))
+    with pytest.raises(ValueError, match="noise_units"):
+        MPPIConfig(noise_units="steps")
+
+
+def test_agent_sets_the_planner_noise_unit_from_the_measured_step() -> None:
+    import gymnasium as gym
+
+    import envs  # noqa: F401
+    from ebm_agent import EBMPlannerAgent
+
+    agent = EBMPlannerAgent(
+        "MultiInputPolicy",
+        gym.make("ebm/Particle-v0"),
+        seed=0,
+        planner_config={"noise_units": "step", "noise_scale": 4e-3, "iterations": 2},
+    )
+    agent.learn(30)
+    assert agent.planner.noise_unit is not None
+    torch.testing.assert_close(agent.planner.noise_unit, torch.as_tensor(agent._measured_step(), dtype=torch.float32))
