@@ -43,3 +43,12 @@ def test_the_settings_count_counts_config_fields_not_config_arguments(capsys: py
     assert settings.main([]) == 0
     out = capsys.readouterr().out
     assert f"| **EBMPlannerAgent** | **total** | **{sum(counts.values())}** |" in out and "| **SAC** | **total** |" in out
+
+
+def test_action_inference_study_prints_one_row_per_setting_and_seed(capsys) -> None:
+    from benchmarks.action_inference import main
+
+    settings = '{"planner_config": {"iterations": 2, "num_samples": 8, "train_iterations": 2}}'
+    assert main(["--env", "particle", "--steps", "60", "--episodes", "1", "--settings", settings, "--seeds", "0", "1"]) == 0
+    rows = [line for line in capsys.readouterr().out.splitlines() if line.startswith("| `")]
+    assert len(rows) == 2 and all(0.0 <= float(row.split("|")[3]) <= 1.0 for row in rows)
