@@ -15,6 +15,7 @@ from typing import Any
 import gymnasium as gym
 import torch.nn as nn
 import yaml
+from stable_baselines3.common.base_class import BaseAlgorithm
 from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.utils import LinearSchedule
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv, VecNormalize
@@ -185,29 +186,18 @@ def normalized(env: gym.Env | VecEnv, kwargs: dict[str, Any] | None) -> gym.Env 
     return VecNormalize(vec_env, **kwargs)
 
 
-def vec_normalize_of(model: Any) -> VecNormalize | None:
-    """The ``VecNormalize`` wrapper a model trains on (SB3's ``get_vec_normalize_env``), or None for a model without one
-    or an agent without that method (this project's planners).
-
-    :param model: an SB3-style model.
-    :return: the wrapper or None.
-    """
-    getter = getattr(model, "get_vec_normalize_env", None)
-    return getter() if callable(getter) else None
-
-
-def normalized_like(model: Any, env: VecEnv) -> VecEnv:
+def normalized_like(model: BaseAlgorithm, env: VecEnv) -> VecEnv:
     """An evaluation env that sees what ``model`` was trained on: wrapped in a frozen ``VecNormalize`` that shares the
     model's observation statistics, when the model has one; else ``env`` itself.
 
     Rewards stay raw (``norm_reward=False``), so scores are in the env's units; the statistics object is shared, so
     evaluations during training see the current statistics (SB3's ``EvalCallback`` also syncs them).
 
-    :param model: an SB3 model (anything with ``get_vec_normalize_env``; others pass through).
+    :param model: an SB3 model (this project's agents too; theirs is always None).
     :param env: the evaluation VecEnv.
     :return: the env to evaluate on.
     """
-    normalizer = vec_normalize_of(model)
+    normalizer = model.get_vec_normalize_env()
     if normalizer is None:
         return env
     wrapped = VecNormalize(
@@ -236,5 +226,4 @@ __all__ = [
     "schedule",
     "table_entry",
     "training_env",
-    "vec_normalize_of",
 ]

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from ebm_agent.moves import MoveStatistics
 from ebm_agent.networks import build_mlp, normalise_dims
 
 __all__ = [
@@ -289,8 +290,7 @@ class RLSInverseDynamics:
         ):
             raise ValueError(f"RLSInverseDynamics: track_steps must be an int >= 1 or None, got {track_steps!r}.")
         self.track_steps = None if track_steps is None else int(track_steps)
-        self.move_sums = np.zeros((2, num_sub))  # [2, d] sums of the real moves s' - s and of their squares
-        self.move_count = 0
+        self.moves = MoveStatistics()  # the real moves s' - s over state_dims, the unit of follow()'s dims
 
     def __call__(self, states: np.ndarray, next_states: np.ndarray, prior_actions: np.ndarray | None = None) -> np.ndarray:
         """
@@ -373,11 +373,7 @@ class RLSInverseDynamics:
         for j in range(steps):
             state = state @ w_state.T + bias
             free[:, j] = state
-        count = self.move_count
-        scale = np.ones(num_sub)
-        if count > 1:
-            mean = self.move_sums[0] / count
-            scale = np.sqrt(np.maximum(self.move_sums[1] / count - mean**2, 0.0)) + 1e-6
+        scale = self.moves.std if self.moves.count > 1 else np.ones(num_sub)  # [d]
         stacked = (gains / scale[None, :, None, None]).reshape(steps * num_sub, steps * num_actions)  # [k d, k A]
         residuals = ((targets - free) / scale).reshape(len(s_sub), steps * num_sub)  # [b, k d]
         normal = stacked.T @ stacked + self.ridge * np.eye(steps * num_actions)  # [k A, k A]
@@ -396,9 +392,7 @@ class RLSInverseDynamics:
             np.float64
         )  # [B, F]
         targets = next_states[:, self.state_dims].astype(np.float64)  # [B, d]
-        moves = targets - features[:, : self.state_dims.size]  # [B, d] s' - s
-        self.move_sums += np.stack([moves.sum(axis=0), (moves**2).sum(axis=0)])
-        self.move_count += moves.shape[0]
+        self.moves.update(features[:, : self.state_dims.size], targets)  # float64 s and s' over state_dims
         error = float(np.mean((targets - features @ self.weights.T) ** 2)) if states.shape[0] else 0.0
         for start in range(0, states.shape[0], 256):  # block size bounds the [b, b] innovation matrix
             self._block_update(features[start : start + 256], targets[start : start + 256])
@@ -427,8 +421,7 @@ class RLSInverseDynamics:
             "num_updates": self.num_updates,
             "state_dims": self.state_dims.copy(),
             "rng_state": json.dumps(self._rng.bit_generator.state),
-            "move_sums": self.move_sums.copy(),
-            "move_count": self.move_count,
+            "moves": self.moves.state_dict(),
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -448,9 +441,7 @@ class RLSInverseDynamics:
         self.num_updates = int(state["num_updates"])
         if state.get("rng_state") is not None:  # absent in states saved before the warm-up existed
             self._rng.bit_generator.state = json.loads(state["rng_state"])
-        # Absent in states saved before plan following existed: its weights then start from ones.
-        self.move_sums = np.asarray(state.get("move_sums", np.zeros_like(self.move_sums)), dtype=np.float64).copy()
-        self.move_count = int(state.get("move_count", 0))
+        self.moves.load_state_dict(state.get("moves"))  # absent before plan following: no move recorded
 
 
 def make_inverse_dynamics(

@@ -105,6 +105,20 @@ class MoveStatistics:
             raise RuntimeError("MoveStatistics: no move added yet; call update(states, next_states) first.")
         return self._largest
 
+    def state_dict(self) -> dict[str, Any]:
+        """:return: the running sums and largest moves (None before any move), to restore with :meth:`load_state_dict`."""
+        return {
+            "sums": None if self._sums is None else self._sums.copy(),
+            "largest": None if self._largest is None else self._largest.copy(),
+        }
+
+    def load_state_dict(self, state: dict[str, Any] | None) -> None:
+        """:param state: a dict from :meth:`state_dict`, or None for no move recorded."""
+        state = state or {}
+        sums, largest = state.get("sums"), state.get("largest")
+        self._sums = None if sums is None else np.asarray(sums, dtype=np.float64).copy()
+        self._largest = None if largest is None else np.asarray(largest).copy()
+
     def _checked_sums(self) -> np.ndarray:
         if self._sums is None:
             raise RuntimeError("MoveStatistics: no move added yet; call update(states, next_states) first.")

@@ -26,7 +26,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.logger import TensorBoardOutputFormat, configure
 
 import envs  # noqa: F401  registers the ebm/ ids in this (possibly fresh) process
-from baselines.hyperparams import normalized_like, vec_normalize_of
+from baselines.hyperparams import normalized_like
 from ebm_agent.datasets import collect_random_transitions
 from ebm_agent.presets import merge_settings, preset_settings
 from ebm_agent.probe import model_quality
@@ -235,7 +235,7 @@ def _train_and_evaluate(job: Job, start: float) -> JobResult:
         _log_final_scalars(model, job, timesteps, episodes.score_mean, episodes.success_rate)
         extra = {name: evaluate_with(model, job, changes) for name, changes in job.extra_evaluations.items()}
         model.save(run_dir / "model.zip")
-        normalizer = vec_normalize_of(model)
+        normalizer = model.get_vec_normalize_env()
         if normalizer is not None:  # the observation statistics the model acts on (SB3's own pickle)
             normalizer.save(str(run_dir / VEC_NORMALIZE))
         save_graph_transitions(model, run_dir / GRAPH_TRANSITIONS)

@@ -332,5 +332,8 @@ def test_follow_checks_its_plans_and_keeps_its_move_statistics() -> None:
     model.update(states, next_states, actions)
     twin = make_inverse_dynamics("rls_tracking", LOW, HIGH, state_dim=2)
     twin.load_state_dict(model.state_dict())
-    assert twin.move_count == 32
-    np.testing.assert_array_equal(twin.move_sums, model.move_sums)
+    assert twin.moves.count == 32
+    np.testing.assert_array_equal(twin.moves.std, model.moves.std)
+    np.testing.assert_array_equal(twin.moves.largest, np.abs(next_states - states).max(axis=0))
+    twin.load_state_dict({key: value for key, value in model.state_dict().items() if key != "moves"})  # saved before
+    assert twin.moves.count == 0

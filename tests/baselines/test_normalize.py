@@ -12,7 +12,7 @@ from stable_baselines3.common.env_util import make_vec_env
 from stable_baselines3.common.vec_env import VecNormalize
 
 import envs
-from baselines.hyperparams import normalize_kwargs, normalized, normalized_like, vec_normalize_of
+from baselines.hyperparams import normalize_kwargs, normalized, normalized_like
 from baselines.ppo import make_ppo
 from baselines.sac_her import VALID_HYPERPARAMS, VALID_REPLAY_BUFFER_KWARGS, make_sac_her, sac_her_hyperparams
 
@@ -59,7 +59,7 @@ def test_fetch_entries_normalise_observations_and_keep_rewards_raw() -> None:
 # ------------------------------------------------------------------------------------------- training and evaluation
 def test_make_sac_her_trains_on_normalised_observations_and_the_evaluation_env_shares_them() -> None:
     model = make_sac_her("fetch-reach", seed=0, learning_starts=50, **SMALL)
-    normalizer = vec_normalize_of(model)
+    normalizer = model.get_vec_normalize_env()
     assert isinstance(normalizer, VecNormalize) and normalizer.training
     assert normalizer.norm_obs and not normalizer.norm_reward
     model.learn(120)
@@ -81,14 +81,13 @@ def test_make_sac_her_trains_on_normalised_observations_and_the_evaluation_env_s
 def test_models_without_normalisation_evaluate_on_the_env_as_it_is() -> None:
     model = make_sac_her("particle", seed=0, learning_starts=100, **SMALL)
     env = make_vec_env("ebm/Particle-v0", n_envs=1, seed=0)
-    assert vec_normalize_of(model) is None and normalized_like(model, env) is env
-    assert vec_normalize_of(object()) is None  # anything without get_vec_normalize_env
+    assert model.get_vec_normalize_env() is None and normalized_like(model, env) is env
     env.close()
 
 
 def test_ppo_takes_the_same_setting() -> None:
     model = make_ppo("particle", seed=0, n_envs=1, n_steps=64, batch_size=32, normalize={"norm_reward": False})
-    assert isinstance(vec_normalize_of(model), VecNormalize)
+    assert isinstance(model.get_vec_normalize_env(), VecNormalize)
     with pytest.raises(ValueError, match="normalize"):
         make_ppo("particle", seed=0, normalize="obs")
 
