@@ -421,7 +421,8 @@ class RLSInverseDynamics:
             "num_updates": self.num_updates,
             "state_dims": self.state_dims.copy(),
             "rng_state": json.dumps(self._rng.bit_generator.state),
-            "moves": self.moves.state_dict(),
+            # Flat, as a checkpoint stores a numpy model's state: moves_sums, moves_largest.
+            **{f"moves_{key}": value for key, value in self.moves.state_dict().items()},
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -441,7 +442,8 @@ class RLSInverseDynamics:
         self.num_updates = int(state["num_updates"])
         if state.get("rng_state") is not None:  # absent in states saved before the warm-up existed
             self._rng.bit_generator.state = json.loads(state["rng_state"])
-        self.moves.load_state_dict(state.get("moves"))  # absent before plan following: no move recorded
+        # Absent in states saved before plan following: no move recorded.
+        self.moves.load_state_dict({"sums": state.get("moves_sums"), "largest": state.get("moves_largest")})
 
 
 def make_inverse_dynamics(

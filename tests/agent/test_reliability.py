@@ -198,6 +198,9 @@ def test_checkpoint_restores_numpy_inverse_dynamics(tmp_path):
     loaded = resumable(EBMPlannerAgent).load_checkpoint(tmp_path / "rls", env=gym.make("ebm/Particle-v0"))
     np.testing.assert_array_equal(loaded.inverse_model.weights, agent.inverse_model.weights)
     assert loaded.inverse_model.num_updates == agent.inverse_model.num_updates
+    # The real moves that weigh plan following's dims come back too.
+    assert loaded.inverse_model.moves.count == agent.inverse_model.moves.count > 0
+    np.testing.assert_array_equal(loaded.inverse_model.moves.std, agent.inverse_model.moves.std)
 
 
 def test_rls_agent_identifies_the_particle_and_plain_save_keeps_the_fit(tmp_path):
